@@ -1,0 +1,124 @@
+"""Wind speed and direction from velocity vectors, with gradient-safe masks.
+
+Conventions (used everywhere in lidarjax):
+
+- Vectors are ``(..., 3)`` arrays ``(u, v, w)`` in a right-handed frame with ``+y`` north
+  (or the lidar's ``+y`` beam S0), ``+x`` east, ``+z`` up, in m/s.
+- *Meteorological direction*: where the wind comes **from**, in degrees clockwise from
+  ``+y`` (north), in ``[0, 360)``. A wind blowing towards ``-y`` (southward) has direction 0.
+- Direction *addends* (differences of directions) are wrapped to ``(-180, 180]``.
+- The seed UDF's own azimuth (``Th_lidar`` in its output files) is the flow heading
+  measured clockwise from ``+x``: ``theta_seed = -atan2(v, u) mod 360``; hence
+  ``meteorological = (theta_seed + 270) mod 360``. See `seed_azimuth`.
+
+Calm (zero horizontal speed) has no direction: `wind_direction` gives NaN there, and its
+gradient is zero rather than NaN/inf (the jax-md ``safe_mask`` pattern: mask the input,
+then the output).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+__all__ = [
+    "horizontal_speed",
+    "wind_direction",
+    "direction_difference",
+    "wrap180",
+    "seed_azimuth",
+]
+
+def _calm_mask(u, v):
+    """True where the horizontal vector is exactly or numerically zero."""
+    h2 = u * u + v * v
+    tiny = jnp.finfo(jnp.result_type(h2)).tiny
+    return h2 <= tiny
+
+
+def horizontal_speed(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
+    """Horizontal speed ``sqrt(u**2 + v**2)`` in the units of ``velocity`` (m/s).
+
+    Gradient-safe: at exactly zero speed the value is 0 and its gradient is 0 (not NaN).
+
+    **Arguments:**
+
+    - `velocity`: ``(..., 3)`` vectors ``(u, v, w)``; ``w`` is ignored.
+
+    **Returns:** ``(...)`` horizontal speed, same dtype as the input.
+    """
+    velocity = jnp.asarray(velocity)
+    u, v = velocity[..., 0], velocity[..., 1]
+    calm = _calm_mask(u, v)
+    su = jnp.where(calm, 1.0, u)
+    sv = jnp.where(calm, 0.0, v)
+    return jnp.where(calm, jnp.zeros_like(u), jnp.sqrt(su * su + sv * sv))
+
+
+def wind_direction(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
+    """Meteorological wind direction in degrees, ``[0, 360)``.
+
+    The direction the wind comes **from**, clockwise from ``+y`` (north of the frame the
+    vector is expressed in). A southward wind ``(0, -1, 0)`` gives 0, a westward wind
+    ``(-1, 0, 0)`` gives 90.
+
+    Calm (zero horizontal speed) gives NaN, with a zero (finite) gradient.
+
+    **Arguments:**
+
+    - `velocity`: ``(..., 3)`` vectors ``(u, v, w)`` in m/s.
+
+    **Returns:** ``(...)`` direction in degrees.
+    """
+    velocity = jnp.asarray(velocity)
+    u, v = velocity[..., 0], velocity[..., 1]
+    calm = _calm_mask(u, v)
+    su = jnp.where(calm, 0.0, u)
+    sv = jnp.where(calm, -1.0, v)
+    d = jnp.rad2deg(jnp.arctan2(-su, -sv))
+    d = jnp.mod(d, 360.0)
+    # mod can return exactly 360 for tiny negative inputs in floating point
+    d = jnp.where(d >= 360.0, d - 360.0, d)
+    return jnp.where(calm, jnp.nan, d)
+
+
+def wrap180(angle: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
+    """Wrap angles in degrees to ``(-180, 180]``."""
+    angle = jnp.asarray(angle)
+    return 180.0 - jnp.mod(180.0 - angle, 360.0)
+
+
+def direction_difference(
+    to: Float[ArrayLike, "... 3"], frm: Float[ArrayLike, "... 3"]
+) -> Float[Array, "..."]:
+    """Direction addend ``direction(to) - direction(frm)`` in degrees, in ``(-180, 180]``.
+
+    Computed from the cross and dot products of the horizontal parts (no subtraction of
+    wrapped angles, so there is no artefact at the 0/360 wrap and the gradient is smooth).
+    It is the clockwise angle from the horizontal vector `frm` to `to`; so
+    ``direction(frm) + result == direction(to)`` modulo 360.
+
+    NaN where either vector is calm (zero horizontal speed), with finite gradients.
+    """
+    to = jnp.asarray(to)
+    frm = jnp.asarray(frm)
+    bx, by = to[..., 0], to[..., 1]
+    ax, ay = frm[..., 0], frm[..., 1]
+    calm = _calm_mask(ax, ay) | _calm_mask(bx, by)
+    cross = ax * by - ay * bx  # counter-clockwise sine term
+    dot = ax * bx + ay * by
+    cross = jnp.where(calm, 0.0, cross)
+    dot = jnp.where(calm, 1.0, dot)
+    d = wrap180(-jnp.rad2deg(jnp.arctan2(cross, dot)))
+    return jnp.where(calm, jnp.nan, d)
+
+
+def seed_azimuth(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
+    """The seed UDF's flow azimuth in degrees, ``[0, 360)``: heading clockwise from ``+x``.
+
+    The UDF computes it piecewise from ``atan(v/u)`` (dividing by zero for ``u = 0``);
+    the closed form is ``-atan2(v, u) mod 360``, and it relates to the meteorological
+    direction by ``wind_direction = (seed_azimuth + 270) mod 360``. Calm gives NaN.
+    """
+    d = wind_direction(velocity)
+    return jnp.mod(d + 90.0, 360.0)

@@ -1,0 +1,250 @@
+"""The forward model: what a lidar would measure and report in a velocity field.
+
+`simulate` is one jit-compiled pure function of a field, a scan, a mount and heights. Its
+static configuration (scan method and beam count, vertical beam, probe type and node count,
+whether a free stream and a point reference are wanted) selects the compiled graph; every
+number (angles, location, heights, field values, ``u_ref``) is a dynamic, differentiable
+input, so changing numbers never recompiles.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float, Int
+
+from ._precision import difference, is_concrete
+from .angles import horizontal_speed, wind_direction
+from .corrections import DEFAULT_RATIO_TOL, correction_factors
+from .field import AbstractField
+from .flags import Flag
+from .frames import cfd_to_north_rotation, lidar_to_cfd_rotation, lidar_to_north_rotation, rotate
+from .mount import Mount
+from .probe import AbstractProbe, PointProbe
+from .scan import ILL_CONDITIONED, Scan, reconstruct
+
+__all__ = ["Simulation", "simulate"]
+
+
+class Simulation(eqx.Module):
+    """Results of `simulate` (dimensions: ``h`` heights, ``b`` beams).
+
+    - `heights`: ``(h,)`` measurement heights above the lidar, m.
+    - `points`: ``(h, b, 3)`` beam measurement points (focus) in CFD coordinates, m.
+    - `directions`: ``(b, 3)`` beam unit vectors in the CFD frame.
+    - `los`: ``(h, b)`` LOS velocities, m/s, positive away from the lidar.
+    - `lidar_velocity`: ``(h, 3)`` the instrument's reconstructed vector, north frame, m/s.
+    - `point_velocity`: ``(h, 3)`` true velocity directly above the lidar, north frame
+      (None with ``point_reference=False``).
+    - `free_velocity`: ``(3,)`` ``u_ref`` carried through the same chain (None without it).
+    - `cff_u, cff_v, cff_w, cff_U, cff_th`: ``(h,)`` factors to the free stream (None
+      without ``u_ref``); `cfp_u, cfp_v, cfp_w, cfp_U, cfp_th` to the point (None without the
+      point reference). See `lidarjax.corrections`.
+    - `flags`: ``(h,)`` int32 bitmask of `lidarjax.Flag` explaining NaNs.
+    - `condition_number`: the scan's beam-matrix condition number.
+    """
+
+    heights: Float[Array, " h"]
+    points: Float[Array, "h b 3"]
+    directions: Float[Array, "b 3"]
+    los: Float[Array, "h b"]
+    lidar_velocity: Float[Array, "h 3"]
+    point_velocity: Float[Array, "h 3"] | None
+    free_velocity: Float[Array, "3"] | None
+    cff_u: Float[Array, " h"] | None
+    cff_v: Float[Array, " h"] | None
+    cff_w: Float[Array, " h"] | None
+    cff_U: Float[Array, " h"] | None
+    cff_th: Float[Array, " h"] | None
+    cfp_u: Float[Array, " h"] | None
+    cfp_v: Float[Array, " h"] | None
+    cfp_w: Float[Array, " h"] | None
+    cfp_U: Float[Array, " h"] | None
+    cfp_th: Float[Array, " h"] | None
+    flags: Int[Array, " h"]
+    condition_number: Float[Array, ""]
+
+    @property
+    def lidar_speed(self) -> Float[Array, " h"]:
+        """Horizontal speed the lidar reports, m/s."""
+        return horizontal_speed(self.lidar_velocity)
+
+    @property
+    def lidar_direction(self) -> Float[Array, " h"]:
+        """Meteorological direction the lidar reports (north frame), degrees."""
+        return wind_direction(self.lidar_velocity)
+
+    @property
+    def point_speed(self) -> Float[Array, " h"]:
+        """Horizontal speed directly above the lidar, m/s."""
+        return horizontal_speed(self.point_velocity)
+
+    @property
+    def point_direction(self) -> Float[Array, " h"]:
+        """Meteorological direction directly above the lidar (north frame), degrees."""
+        return wind_direction(self.point_velocity)
+
+    @property
+    def free_speed(self) -> Float[Array, ""]:
+        """Horizontal free-stream speed, m/s."""
+        return horizontal_speed(self.free_velocity)
+
+    @property
+    def free_direction(self) -> Float[Array, ""]:
+        """Meteorological free-stream direction (north frame), degrees."""
+        return wind_direction(self.free_velocity)
+
+
+def _validate(field, scan, mount, heights, u_ref, probe) -> None:
+    if not isinstance(field, AbstractField):
+        raise ValueError(
+            f"simulate: `field` must be a lidarjax.GridField or a scene from lidarjax.scenes, "
+            f"got {type(field).__name__}."
+        )
+    if not isinstance(scan, Scan):
+        raise ValueError(
+            f"simulate: `scan` must be a lidarjax.Scan (e.g. lidarjax.windcube_v1()), got "
+            f"{type(scan).__name__}."
+        )
+    if not isinstance(mount, Mount):
+        raise ValueError(f"simulate: `mount` must be a lidarjax.Mount, got {type(mount).__name__}.")
+    if not isinstance(probe, AbstractProbe):
+        raise ValueError(f"simulate: `probe` must be a probe, got {type(probe).__name__}.")
+    if is_concrete(heights):
+        h = np.asarray(heights, dtype=np.float64)
+        if h.ndim != 1 or h.size == 0:
+            raise ValueError(
+                f"simulate: `heights` must be a non-empty 1-D array of metres above the lidar, "
+                f"got shape {h.shape}."
+            )
+        if not np.all(np.isfinite(h)) or np.any(h <= 0):
+            raise ValueError(
+                f"simulate: `heights` must be positive and finite (metres above the lidar), got "
+                f"{h.tolist()}."
+            )
+    if u_ref is not None and is_concrete(u_ref):
+        u = np.asarray(u_ref, dtype=np.float64)
+        if u.shape != (3,) or not np.all(np.isfinite(u)):
+            raise ValueError(
+                f"simulate: `u_ref` must be a finite free-stream vector (u, v, w) in the CFD "
+                f"frame, m/s, shape (3,); got {u_ref!r}."
+            )
+
+
+def simulate(
+    field: AbstractField,
+    scan: Scan,
+    mount: Mount,
+    heights: Float[ArrayLike, " h"],
+    *,
+    u_ref: Float[ArrayLike, "3"] | None = None,
+    probe: AbstractProbe | None = None,
+    point_reference: bool = True,
+    ratio_tol: float = DEFAULT_RATIO_TOL,
+) -> Simulation:
+    """Simulate a lidar in a velocity field.
+
+    **Arguments:**
+
+    - `field`: a `lidarjax.GridField` or an analytic scene (CFD frame, m/s).
+    - `scan`: beam geometry and reconstruction (`lidarjax.windcube_v1` etc.).
+    - `mount`: location and angles (`lidarjax.Mount`, degrees and metres).
+    - `heights`: ``(h,)`` measurement heights above the lidar in metres; a tilted beam's focus
+      for height ``h`` is at range ``h / cos(cone)``, the vertical beam's at ``h``.
+    - `u_ref`: free-stream vector ``(u, v, w)`` in the CFD frame (m/s); gives `free_velocity`
+      and the ``cff_*`` factors. Without it none of that is compiled.
+    - `probe`: probe volume (default `lidarjax.PointProbe`, which compiles no quadrature).
+    - `point_reference`: also sample the true wind directly above the lidar (static).
+    - `ratio_tol`: relative tolerance of correction-factor denominators (see
+      `lidarjax.corrections`).
+
+    **Returns:** a `Simulation`; its dtype follows the field's.
+
+    Raises `ValueError` before compiling for inputs of the wrong type, shape or range.
+    Inside the compiled function, points outside the field give NaN with a `Flag`.
+    """
+    if probe is None:
+        probe = PointProbe()
+    _validate(field, scan, mount, heights, u_ref, probe)
+    heights = jnp.atleast_1d(jnp.asarray(heights))
+    if not jnp.issubdtype(heights.dtype, jnp.floating):
+        heights = heights.astype(field.dtype)
+    if u_ref is not None:
+        u_ref = jnp.asarray(u_ref)
+    return _simulate_jit(
+        field, scan, mount, heights, u_ref, probe, ratio_tol, point_reference=point_reference
+    )
+
+
+def _beam_los(field, origin_local, directions, ranges, probe):
+    """LOS ``(h, b)`` for focus ranges ``(h, b)`` along CFD beam `directions` ``(b, 3)``."""
+    if isinstance(probe, PointProbe):
+        pts = origin_local + ranges[..., None] * directions
+        return field.los_local(pts, directions)
+    offsets, weights = probe.nodes(ranges)  # (h, b, q) or broadcastable
+    offsets = jnp.broadcast_to(offsets, ranges.shape + offsets.shape[-1:])
+    weights = jnp.broadcast_to(weights, offsets.shape).astype(ranges.dtype)
+    pts = origin_local + (ranges[..., None] + offsets)[..., None] * directions[:, None, :]
+    los_q = field.los_local(pts, directions[:, None, :])
+    return jnp.sum(weights * los_q, axis=-1)
+
+
+def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
+    dtype = field.dtype
+    heights = heights.astype(dtype)
+    cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
+    # The lidar relative to the field's origin, before anything is rounded to `dtype`.
+    origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo, dtype)
+    scan = jax.tree_util.tree_map(cast, scan)
+    angles = jax.tree_util.tree_map(cast, mount)
+    n_lidar = scan.directions()  # (b, 3)
+    to_cfd = lidar_to_cfd_rotation(angles)
+    n_cfd = rotate(to_cfd, n_lidar)
+    ranges = heights[:, None] / n_lidar[None, :, 2]  # (h, b): h / cos(cone)
+    los = _beam_los(field, origin_local, n_cfd, ranges, probe)
+
+    to_north = lidar_to_north_rotation(angles)
+    lidar_velocity = rotate(to_north, reconstruct(scan, los))
+    cfd_to_north = cfd_to_north_rotation(angles)
+
+    flags = jnp.where(jnp.any(jnp.isnan(los), axis=-1), int(Flag.BEAM_OUTSIDE), 0)
+    if point_reference:
+        zhat = jnp.array([0.0, 0.0, 1.0], dtype)
+        v_point = field.sample_local(origin_local + heights[:, None] * zhat)
+        point_velocity = rotate(cfd_to_north, v_point)
+        flags |= jnp.where(jnp.any(jnp.isnan(point_velocity), -1), int(Flag.POINT_OUTSIDE), 0)
+    else:
+        point_velocity = None
+    free_velocity = None if u_ref is None else rotate(cfd_to_north, cast(u_ref))
+
+    factors = correction_factors(lidar_velocity, point_velocity, free_velocity, ratio_tol)
+    h2 = lidar_velocity[..., 0] ** 2 + lidar_velocity[..., 1] ** 2
+    flags |= jnp.where(h2 == 0, int(Flag.CALM), 0)
+    cond = scan.condition_number()
+    flags |= jnp.where(cond > ILL_CONDITIONED, int(Flag.ILL_CONDITIONED), 0)
+    ratio_nan = jnp.zeros(heights.shape, bool)
+    for key in ("cff_u", "cff_v", "cff_U", "cfp_u", "cfp_v", "cfp_w", "cfp_U"):
+        f = factors[key]
+        if f is not None:
+            ratio_nan |= jnp.isnan(f)
+    lidar_ok = ~jnp.any(jnp.isnan(lidar_velocity), -1)
+    flags |= jnp.where(ratio_nan & lidar_ok, int(Flag.RATIO_UNDEFINED), 0)
+
+    points = field.origin + (origin_local + ranges[..., None] * n_cfd) + field.origin_lo
+    return Simulation(
+        heights=heights,
+        points=points,
+        directions=n_cfd,
+        los=los,
+        lidar_velocity=lidar_velocity,
+        point_velocity=point_velocity,
+        free_velocity=free_velocity,
+        flags=flags.astype(jnp.int32),
+        condition_number=cond,
+        **factors,
+    )
+
+
+_simulate_jit = jax.jit(_simulate, static_argnames=("point_reference",))

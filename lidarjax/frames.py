@@ -1,0 +1,89 @@
+"""The frame chain, written once and used for positions and velocities alike.
+
+Frames (all right-handed, ``z`` up, metres and m/s):
+
+- **CFD frame**: the coordinates of the field (a grid or an analytic scene).
+- **Lidar frame**: origin at the lidar, ``+y`` towards beam S0 (azimuth 0), ``+x`` towards
+  beam S1 (azimuth 90, clockwise from ``+y`` seen from above), ``+z`` up.
+- **North frame**: the lidar frame rotated by the instrument's software north offset
+  ``epsilon``; reconstructed, point and free-stream vectors are reported in it.
+
+Rotations are about ``z``, positive anticlockwise seen from above (the seed's
+equation 13): ``R(t) = [[cos t, -sin t, 0], [sin t, cos t, 0], [0, 0, 1]]``.
+
+The chain (angles of `lidarjax.Mount`, degrees):
+
+- velocity CFD -> lidar: rotate by ``psi``, then by ``-(beta + gamma)``, i.e.
+  ``v_lidar = R(psi - beta - gamma) v_cfd``;
+- position lidar -> CFD: the exact inverse, ``p_cfd = R(beta + gamma - psi) p_lidar + location``;
+- lidar -> north: ``v_north = R(-epsilon) v_lidar``.
+
+The seed UDF rotates positions by ``R(beta + gamma) R(psi)`` instead of the inverse of its
+velocity rotation; the two agree only for ``psi`` equal to 0 or 180 degrees (rotations about
+one axis commute, so its chain is ``R(beta + gamma + psi)``). lidarjax uses the consistent
+chain for every ``psi``.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+__all__ = [
+    "rotation_z",
+    "lidar_to_cfd_rotation",
+    "cfd_to_lidar_rotation",
+    "lidar_to_north_rotation",
+    "cfd_to_north_rotation",
+    "beam_directions",
+    "rotate",
+]
+
+
+def rotation_z(angle_deg: Float[ArrayLike, ""]) -> Float[Array, "3 3"]:
+    """Rotation matrix about ``z`` by `angle_deg` degrees, anticlockwise seen from above."""
+    t = jnp.deg2rad(jnp.asarray(angle_deg))
+    c, s = jnp.cos(t), jnp.sin(t)
+    o, i = jnp.zeros_like(t), jnp.ones_like(t)
+    return jnp.stack(
+        [jnp.stack([c, -s, o]), jnp.stack([s, c, o]), jnp.stack([o, o, i])]
+    )
+
+
+def rotate(matrix: Float[Array, "3 3"], vectors: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+    """Apply a ``3x3`` rotation to ``(..., 3)`` vectors."""
+    return jnp.einsum("ij,...j->...i", matrix, vectors)
+
+
+def lidar_to_cfd_rotation(mount) -> Float[Array, "3 3"]:
+    """Rotation taking lidar-frame positions (and vectors) to the CFD frame: ``R(beta+gamma-psi)``."""
+    return rotation_z(mount.beta + mount.gamma - mount.psi)
+
+
+def cfd_to_lidar_rotation(mount) -> Float[Array, "3 3"]:
+    """Rotation taking CFD-frame velocities to the lidar frame: ``R(psi - beta - gamma)``."""
+    return rotation_z(mount.psi - mount.beta - mount.gamma)
+
+
+def lidar_to_north_rotation(mount) -> Float[Array, "3 3"]:
+    """The instrument's software rotation, lidar -> north frame: ``R(-epsilon)``."""
+    return rotation_z(-mount.epsilon)
+
+
+def cfd_to_north_rotation(mount) -> Float[Array, "3 3"]:
+    """CFD-frame velocities to the north frame: ``R(-epsilon) R(psi - beta - gamma)``."""
+    return rotation_z(mount.psi - mount.beta - mount.gamma - mount.epsilon)
+
+
+def beam_directions(
+    azimuth_deg: Float[ArrayLike, " b"], cone_deg: Float[ArrayLike, " b"]
+) -> Float[Array, "b 3"]:
+    """Beam unit vectors in the lidar frame: ``(sin c sin a, sin c cos a, cos c)``.
+
+    `azimuth_deg` is clockwise from the lidar's ``+y`` (beam S0); `cone_deg` is the angle
+    from the vertical (0 for a vertical beam).
+    """
+    a = jnp.deg2rad(jnp.asarray(azimuth_deg))
+    c = jnp.deg2rad(jnp.asarray(cone_deg))
+    sc = jnp.sin(c)
+    return jnp.stack([sc * jnp.sin(a), sc * jnp.cos(a), jnp.cos(c)], axis=-1)
