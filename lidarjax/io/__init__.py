@@ -11,6 +11,18 @@ Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/wr
 without it.
 """
 
+from .seed_output import SEED_COLUMNS as SEED_COLUMNS
+from .seed_output import SEED_UNITS as SEED_UNITS
+from .seed_output import CsvTable as CsvTable
+from .seed_output import meteorological_from_seed as meteorological_from_seed
+from .seed_output import read_seed_output as read_seed_output
+from .seed_output import read_table_csv as read_table_csv
+from .seed_output import seed_azimuth as seed_azimuth
+from .seed_output import seed_from_meteorological as seed_from_meteorological
+from .seed_output import seed_output_filename as seed_output_filename
+from .seed_output import write_netcdf as write_netcdf
+from .seed_output import write_seed_output as write_seed_output
+from .seed_output import write_table_csv as write_table_csv
 from .settings import Settings as Settings
 from .settings import read_settings as read_settings
 from .settings import write_settings as write_settings

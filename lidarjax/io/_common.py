@@ -59,6 +59,11 @@ def have_module(module: str) -> bool:
     return True
 
 
+def netcdf_engine() -> str:
+    """`h5netcdf` (NetCDF4) when it and h5py are installed, else scipy's NetCDF3 writer."""
+    return "h5netcdf" if have_module("h5netcdf") and have_module("h5py") else "scipy"
+
+
 @contextlib.contextmanager
 def atomic_path(path: PathLike) -> Iterator[Path]:
     """Yield a fresh temporary path beside `path`; on success move it onto `path` atomically.
