@@ -26,3 +26,6 @@ from .seed_output import write_table_csv as write_table_csv
 from .settings import Settings as Settings
 from .settings import read_settings as read_settings
 from .settings import write_settings as write_settings
+from .sta import STA_FIELDS as STA_FIELDS
+from .sta import StaRecord as StaRecord
+from .sta import read_sta as read_sta
