@@ -11,6 +11,11 @@ Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/wr
 without it.
 """
 
+from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
+from .rtd import RtdBeams as RtdBeams
+from .rtd import RtdRecord as RtdRecord
+from .rtd import group_rtd as group_rtd
+from .rtd import read_rtd as read_rtd
 from .seed_output import SEED_COLUMNS as SEED_COLUMNS
 from .seed_output import SEED_UNITS as SEED_UNITS
 from .seed_output import CsvTable as CsvTable
