@@ -34,3 +34,5 @@ from .settings import write_settings as write_settings
 from .sta import STA_FIELDS as STA_FIELDS
 from .sta import StaRecord as StaRecord
 from .sta import read_sta as read_sta
+from .zephir import ZephirRecord as ZephirRecord
+from .zephir import read_zephir_csv as read_zephir_csv

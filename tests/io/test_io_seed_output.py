@@ -89,7 +89,8 @@ def test_calm_has_no_azimuth():
 @pytest.mark.parametrize(
     ("beta", "name"),
     [(330.0, "windcube simulation 330 degrees.dat"), (0, "windcube simulation 0 degrees.dat"),
-     (22.5, "windcube simulation 22.5 degrees.dat"), (-30.0, "windcube simulation -30 degrees.dat")],
+     (22.5, "windcube simulation 22.5 degrees.dat"),
+     (-30.0, "windcube simulation -30 degrees.dat")],
 )
 def test_filename(beta, name):
     assert seed_output_filename(beta) == name

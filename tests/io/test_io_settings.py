@@ -124,7 +124,8 @@ def test_missing_file(tmp_path):
 @pytest.mark.parametrize(
     ("values", "rows", "line", "fragment"),
     [
-        ("2 0 1.0 50.5 0 330 180 21\n", SEED_ROWS, 2, "nh: expected a positive integer, found '50.5'"),
+        ("2 0 1.0 50.5 0 330 180 21\n", SEED_ROWS, 2,
+         "nh: expected a positive integer, found '50.5'"),
         ("2 0 1.0 0 0 330 180 21\n", SEED_ROWS, 2, "nh: expected a positive integer, found '0'"),
         ("2 0 1.0 -5 0 330 180 21\n", SEED_ROWS, 2, "nh: expected a positive integer"),
         ("2 0 1.0 abc 0 330 180 21\n", SEED_ROWS, 2, "nh: expected a number, found 'abc'"),
@@ -135,7 +136,8 @@ def test_missing_file(tmp_path):
         ("2 0 1.0 50 0 nan 180 21\n", SEED_ROWS, 2, "beta: expected a finite number"),
         (SEED_VALUES, [(0, 1, 2, 3), (30, 1, "y?", 3)], 4, "y: expected a number, found 'y?'"),
         (SEED_VALUES, [(0, 1, 2, 3), (30, 1, 2)], 4, "expected 4 fields 'beta x y z', found 3"),
-        (SEED_VALUES, [(0, 1, 2, 3), (30, 1, 2, 3, 4)], 4, "expected 4 fields 'beta x y z', found 5"),
+        (SEED_VALUES, [(0, 1, 2, 3), (30, 1, 2, 3, 4)], 4,
+         "expected 4 fields 'beta x y z', found 5"),
     ],
 )
 def test_malformed_values(tmp_path, values, rows, line, fragment):

@@ -195,7 +195,8 @@ def write_v2(tmp_path, text, name="x.sta"):
 
 
 def test_v2_minimal_with_seconds_and_blank_lines(tmp_path):
-    rows = ["2021/01/02 03:10:30\t5.5\t10.0\t\t6.5\t20.0\t", "", "2021/01/02 03:20\tNaN\t11\t\t7\t21\t"]
+    rows = ["2021/01/02 03:10:30\t5.5\t10.0\t\t6.5\t20.0\t", "",
+            "2021/01/02 03:20\tNaN\t11\t\t7\t21\t"]
     r = read_sta(write_v2(tmp_path, v2_text(rows)))
     assert r.time[0] == np.datetime64("2021-01-02T03:10:30") and r.scan_angle == 28.0
     np.testing.assert_array_equal(r.speed, [[5.5, 6.5], [np.nan, 7.0]])
@@ -221,7 +222,8 @@ def test_no_altitudes_header_uses_columns(tmp_path):
          "column 'Timestamp (end of interval)': unrecognised timestamp '2021/13/02 03:10'"),
         (v2_text(["2021/01/02 03:10\t1\t2\t\t3\t4\t", "2021/01/02 03:20\t1\toops\t\t3\t4\t"]), 9,
          "column '40m Wind Direction (\u00b0)': expected a number, found 'oops'"),
-        (v2_text(["2021/01/02 03:10\t1\t2\t\t3"]), 8, "expected at least 6 tab-separated fields, found 5"),
+        (v2_text(["2021/01/02 03:10\t1\t2\t\t3"]), 8,
+         "expected at least 6 tab-separated fields, found 5"),
         (v2_text([], header=["Altitudes (m)=\t40\tsixty"]), 2,
          "'Altitudes (m)': expected altitudes in metres, found '40\\tsixty'"),
     ],
