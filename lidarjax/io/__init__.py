@@ -11,6 +11,14 @@ Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/wr
 without it.
 """
 
+from .fields import FieldArrays as FieldArrays
+from .fields import FieldLoadReport as FieldLoadReport
+from .fields import load_field as load_field
+from .fields import read_field_arrays as read_field_arrays
+from .fields import read_fluent_points as read_fluent_points
+from .fields import resample_to_grid as resample_to_grid
+from .fields import save_field_netcdf as save_field_netcdf
+from .fields import save_field_npz as save_field_npz
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord
