@@ -147,6 +147,9 @@ def seed_azimuth(
     The heading the flow goes towards, clockwise from +x (east); see the module
     docstring. `u`, `v` in m/s (any common shape). Calm points (`u = v = 0`) have no
     direction and give NaN.
+
+    This is the numpy twin, on separate components, of the JAX `lidarjax.seed_azimuth`,
+    which takes `(..., 3)` velocity vectors; both give the same angles.
     """
     u_ = np.asarray(u, dtype=np.float64)
     v_ = np.asarray(v, dtype=np.float64)

@@ -220,8 +220,14 @@ def test_netcdf_needs_xarray(tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
-def test_netcdf_round_trip(tmp_path):
+@pytest.mark.parametrize("force_scipy", [False, True])
+def test_netcdf_round_trip(tmp_path, monkeypatch, force_scipy):
     xr = pytest.importorskip("xarray")
+    from lidarjax.io import _common
+
+    if force_scipy:  # as on a machine with xarray but without h5netcdf/h5py
+        monkeypatch.setattr(_common, "have_module", lambda name: name not in ("h5netcdf", "h5py"))
+        assert _common.netcdf_engine() == "scipy"
     cols = columns(nh=6)
     path = write_netcdf(tmp_path / "seed.nc", cols, {"beta": 330.0, "verbose": True,
                                                     "source": "settings.dat"})
