@@ -137,9 +137,9 @@ class StaRecord:
     direction_offset: float
 
     def __post_init__(self) -> None:
-        t, k = self.time.shape[0], self.heights.shape[0]
         if self.time.ndim != 1 or self.heights.ndim != 1:
             raise ValueError("time and heights must be 1-D")
+        t, k = self.time.shape[0], self.heights.shape[0]
         for name in STA_FIELDS:
             if getattr(self, name).shape != (t, k):
                 raise ValueError(
