@@ -2,6 +2,7 @@
 
 import importlib.metadata
 
+from . import io as io
 from . import scenes as scenes
 from .angles import direction_difference as direction_difference
 from .angles import horizontal_speed as horizontal_speed
