@@ -1,0 +1,106 @@
+"""The seed UDF's workflow on top of `simulate`: settings.dat in, seed output files out.
+
+`simulate_settings` runs every platform rotation (beta) of a `Settings` in one compiled
+batch when the CFD runs share a grid (one trace, ``jax.vmap`` over the runs), and
+`seed_columns` turns a `Simulation` into the seed's 21 output columns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .angles import horizontal_speed, seed_azimuth
+from .field import GridField
+from .forward import Simulation, simulate
+from .io.settings import Settings
+from .mount import Mount
+
+__all__ = ["seed_columns", "simulate_settings", "SEED_U_REF"]
+
+#: The free stream hard-coded in the seed UDF (its CFD inlet), CFD frame, m/s.
+SEED_U_REF = (-15.0, 0.0, 0.0)
+
+
+def seed_columns(sim: Simulation) -> dict[str, np.ndarray]:
+    """The seed's 21 output columns for one `Simulation` (heights ``(h,)``).
+
+    Speeds in m/s, ``Th_lidar`` / ``th_point`` in the seed's azimuth (flow heading clockwise
+    from ``+x``; see `lidarjax.seed_azimuth`), factors as in `lidarjax.corrections`. Factors
+    whose reference was not simulated are NaN.
+    """
+    h = np.asarray(sim.heights)
+    nan = np.full(h.shape, np.nan)
+    L = sim.lidar_velocity
+    P = sim.point_velocity if sim.point_velocity is not None else jnp.full(L.shape, jnp.nan)
+    cols = {
+        "h": h,
+        "U_mag_lidar": horizontal_speed(L), "U_lidar": L[:, 0], "V_lidar": L[:, 1],
+        "W_lidar": L[:, 2], "Th_lidar": seed_azimuth(L),
+        "U_mag_point": horizontal_speed(P), "U_point": P[:, 0], "V_point": P[:, 1],
+        "W_point": P[:, 2], "th_point": seed_azimuth(P),
+    }
+    for name in ("cff_u", "cff_v", "cff_w", "cff_U", "cff_th",
+                 "cfp_u", "cfp_v", "cfp_w", "cfp_U", "cfp_th"):
+        value = getattr(sim, name)
+        cols[name] = nan if value is None else value
+    return {k: np.asarray(v, dtype=np.float64) for k, v in cols.items()}
+
+
+def _same_grid(fields: Sequence[GridField]) -> bool:
+    f0 = fields[0]
+    return all(
+        f.shape == f0.shape and f.uniform == f0.uniform and f.velocity.dtype == f0.velocity.dtype
+        and all(np.array_equal(np.asarray(a), np.asarray(b)) for a, b in (
+            (f.x_local, f0.x_local), (f.y_local, f0.y_local), (f.z_local, f0.z_local),
+            (f.origin, f0.origin), (f.origin_lo, f0.origin_lo)))
+        for f in fields[1:]
+    )
+
+
+def simulate_settings(
+    settings: Settings,
+    betas: Sequence[float],
+    field_for_beta: Callable[[float], GridField],
+    scan,
+    *,
+    u_ref=SEED_U_REF,
+    probe=None,
+) -> dict[float, Simulation]:
+    """Simulate the lidar of `settings` for each platform rotation in `betas`.
+
+    **Arguments:**
+
+    - `settings`: a `lidarjax.io.Settings` (heights ``j * height / nh``, gamma, psi,
+      epsilon and one location per beta).
+    - `betas`: platform rotations (degrees) to run; each needs a location row.
+    - `field_for_beta`: loads the CFD run of one beta (e.g. ``lidarjax.io.load_field``).
+    - `scan`: the `lidarjax.Scan`.
+    - `u_ref`: free-stream vector in the CFD frame (m/s); default the seed UDF's.
+    - `probe`: probe volume (default point).
+
+    **Returns:** ``{beta: Simulation}``. Runs on one grid are simulated in one compiled,
+    vmapped batch; otherwise one call per run (one compilation per distinct grid shape).
+    """
+    betas = [float(b) for b in betas]
+    mounts = [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
+                    epsilon=settings.epsilon) for b in betas]
+    heights = jnp.asarray(settings.heights())
+    fields = [field_for_beta(b) for b in betas]
+    if len(fields) > 1 and _same_grid(fields):
+        f0 = fields[0]
+        stacked_vel = jnp.stack([f.velocity for f in fields])
+        stacked_mount = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *mounts)
+
+        def one(vel, mount):
+            field = eqx.tree_at(lambda f: f.velocity, f0, vel)
+            return simulate(field, scan, mount, heights, u_ref=u_ref, probe=probe)
+
+        batch = jax.vmap(one)(stacked_vel, stacked_mount)
+        return {b: jax.tree_util.tree_map(lambda a, i=i: a[i], batch) for i, b in enumerate(betas)}
+    return {b: simulate(f, scan, m, heights, u_ref=u_ref, probe=probe)
+            for b, f, m in zip(betas, fields, mounts)}
