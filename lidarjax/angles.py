@@ -11,7 +11,8 @@ Conventions (used everywhere in lidarjax):
   measured clockwise from ``+x``: ``theta_seed = -atan2(v, u) mod 360``; hence
   ``meteorological = (theta_seed + 270) mod 360``. See `seed_azimuth`.
 
-Calm (zero horizontal speed) has no direction: `wind_direction` gives NaN there, and its
+Calm (a horizontal speed whose square underflows: below ``sqrt(finfo.tiny)``, about
+1.5e-154 m/s in float64 and 1.1e-19 m/s in float32) has no direction: `wind_direction` gives NaN there, and its
 gradient is zero rather than NaN/inf (the jax-md ``safe_mask`` pattern: mask the input,
 then the output).
 """
@@ -34,6 +35,14 @@ def _calm_mask(u, v):
     h2 = u * u + v * v
     tiny = jnp.finfo(jnp.result_type(h2)).tiny
     return h2 <= tiny
+
+
+def _unit(u, v, calm):
+    """(u, v) / |(u, v)| with calm entries replaced by (1, 0) (finite gradients)."""
+    su = jnp.where(calm, 1.0, u)
+    sv = jnp.where(calm, 0.0, v)
+    n = jnp.sqrt(su * su + sv * sv)
+    return su / n, sv / n
 
 
 def horizontal_speed(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
@@ -105,6 +114,10 @@ def direction_difference(
     bx, by = to[..., 0], to[..., 1]
     ax, ay = frm[..., 0], frm[..., 1]
     calm = _calm_mask(ax, ay) | _calm_mask(bx, by)
+    # unit horizontal vectors first, so cross and dot stay O(1) for tiny speeds (their squares
+    # would underflow in the atan2 derivative)
+    ax, ay = _unit(ax, ay, calm)
+    bx, by = _unit(bx, by, calm)
     cross = ax * by - ay * bx  # counter-clockwise sine term
     dot = ax * bx + ay * by
     cross = jnp.where(calm, 0.0, cross)
