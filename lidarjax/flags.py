@@ -30,3 +30,8 @@ class Flag(enum.IntFlag):
     #: A correction factor is NaN because its denominator is below the ratio tolerance
     #: (a component of the lidar vector is nearly zero).
     RATIO_UNDEFINED = 16
+    #: A probe volume reached behind the lidar (range <= 0) on some beam and the weight of
+    #: the nodes dropped there exceeded the probe's ``tail``: the remaining nodes were
+    #: renormalised, so the LOS is finite but weights the near side less (see
+    #: `lidarjax.probe`).
+    PROBE_TRUNCATED = 32

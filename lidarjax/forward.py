@@ -155,7 +155,9 @@ def simulate(
       for height ``h`` is at range ``h / cos(cone)``, the vertical beam's at ``h``.
     - `u_ref`: free-stream vector ``(u, v, w)`` in the CFD frame (m/s); gives `free_velocity`
       and the ``cff_*`` factors. Without it none of that is compiled.
-    - `probe`: probe volume (default `lidarjax.PointProbe`, which compiles no quadrature).
+    - `probe`: probe volume (default `lidarjax.PointProbe`, which compiles no quadrature;
+      `lidarjax.PulsedProbe`, `lidarjax.CWProbe` average along each beam, in the field's
+      length units: see `lidarjax.probe`). `points` stay the focus points.
     - `point_reference`: also sample the true wind directly above the lidar (static).
     - `ratio_tol`: relative tolerance of correction-factor denominators (see
       `lidarjax.corrections`).
@@ -179,16 +181,25 @@ def simulate(
 
 
 def _beam_los(field, origin_local, directions, ranges, probe):
-    """LOS ``(h, b)`` for focus ranges ``(h, b)`` along CFD beam `directions` ``(b, 3)``."""
+    """LOS ``(h, b)`` for focus ranges ``(h, b)`` along CFD beam `directions` ``(b, 3)``,
+    and ``(h, b)`` booleans: the probe dropped more than its ``tail`` of weight behind the
+    lidar (None for the point probe, which compiles no quadrature at all)."""
     if isinstance(probe, PointProbe):
         pts = origin_local + ranges[..., None] * directions
-        return field.los_local(pts, directions)
+        return field.los_local(pts, directions), None
     offsets, weights = probe.nodes(ranges)  # (h, b, q) or broadcastable
-    offsets = jnp.broadcast_to(offsets, ranges.shape + offsets.shape[-1:])
-    weights = jnp.broadcast_to(weights, offsets.shape).astype(ranges.dtype)
-    pts = origin_local + (ranges[..., None] + offsets)[..., None] * directions[:, None, :]
+    offsets = jnp.broadcast_to(offsets.astype(ranges.dtype), ranges.shape + offsets.shape[-1:])
+    weights = jnp.broadcast_to(weights.astype(ranges.dtype), offsets.shape)
+    node_ranges = ranges[..., None] + offsets
+    pts = origin_local + node_ranges[..., None] * directions[:, None, :]
     los_q = field.los_local(pts, directions[:, None, :])
-    return jnp.sum(weights * los_q, axis=-1)
+    # no light returns from behind the lidar: drop nodes at range <= 0, renormalise the rest
+    ahead = node_ranges > 0
+    kept = jnp.where(ahead, weights, 0)
+    total = jnp.sum(kept, axis=-1)
+    los = jnp.sum(jnp.where(ahead, kept * los_q, 0), axis=-1) / total
+    truncated = (1 - total) > probe.tail.astype(ranges.dtype)
+    return los, truncated
 
 
 def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
@@ -203,13 +214,15 @@ def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_ref
     to_cfd = lidar_to_cfd_rotation(angles)
     n_cfd = rotate(to_cfd, n_lidar)
     ranges = heights[:, None] / n_lidar[None, :, 2]  # (h, b): h / cos(cone)
-    los = _beam_los(field, origin_local, n_cfd, ranges, probe)
+    los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)
 
     to_north = lidar_to_north_rotation(angles)
     lidar_velocity = rotate(to_north, reconstruct(scan, los))
     cfd_to_north = cfd_to_north_rotation(angles)
 
     flags = jnp.where(jnp.any(jnp.isnan(los), axis=-1), int(Flag.BEAM_OUTSIDE), 0)
+    if truncated is not None:
+        flags |= jnp.where(jnp.any(truncated, axis=-1), int(Flag.PROBE_TRUNCATED), 0)
     if point_reference:
         zhat = jnp.array([0.0, 0.0, 1.0], dtype)
         v_point = field.sample_local(origin_local + heights[:, None] * zhat)
