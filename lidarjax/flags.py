@@ -30,8 +30,8 @@ class Flag(enum.IntFlag):
     #: A correction factor is NaN because its denominator is below the ratio tolerance
     #: (a component of the lidar vector is nearly zero).
     RATIO_UNDEFINED = 16
-    #: A probe volume reached behind the lidar (range <= 0) on some beam and the weight of
-    #: the nodes dropped there exceeded the probe's ``tail``: the remaining nodes were
-    #: renormalised, so the LOS is finite but weights the near side less (see
-    #: `lidarjax.probe`).
+    #: A probe volume reached the lidar (range <= 0) on some beam: its nodes were cut
+    #: symmetrically at ``|offset| < range`` and renormalised, and the weight dropped exceeded
+    #: the probe's ``tail``. The LOS is finite but averages over a shorter stretch of beam
+    #: (see `lidarjax.probe`).
     PROBE_TRUNCATED = 32

@@ -2,8 +2,8 @@
 
 `scan_bounds` gives the axis-aligned box (absolute CFD coordinates) that holds every point
 `lidarjax.simulate` samples for a scan, mount(s), heights and probe: each beam's probe
-support from ``max(f - support, 0)`` to ``f + support`` (nodes behind the lidar get no
-weight, so they need no field) and, with ``point_reference=True``, the column above the
+nodes from ``f - reach`` to ``f + reach`` with ``reach = min(max |offset|, f)`` (nodes
+beyond the probe's cut at the lidar get no weight, so they need no field) and, with ``point_reference=True``, the column above the
 lidar. `lidarjax.GridField.crop` then keeps those cells plus a one-cell interpolation margin
 on each side, and results on the crop equal the full field's bit for bit:
 
@@ -72,8 +72,8 @@ def scan_bounds(
         offsets, _ = probe.nodes(ranges)
         offsets = np.asarray(offsets, np.float64)
         offsets = np.broadcast_to(offsets, ranges.shape + offsets.shape[-1:])
-        near = np.maximum(ranges + offsets.min(axis=-1), 0.0)
-        far = ranges + offsets.max(axis=-1)
+        reach = np.minimum(np.abs(offsets).max(axis=-1), ranges)  # the cut at the lidar
+        near, far = ranges - reach, ranges + reach
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for mount in _mount_list(mounts):

@@ -182,8 +182,8 @@ def simulate(
 
 def _beam_los(field, origin_local, directions, ranges, probe):
     """LOS ``(h, b)`` for focus ranges ``(h, b)`` along CFD beam `directions` ``(b, 3)``,
-    and ``(h, b)`` booleans: the probe dropped more than its ``tail`` of weight behind the
-    lidar (None for the point probe, which compiles no quadrature at all)."""
+    and ``(h, b)`` booleans: the probe's symmetric cut at the lidar dropped more than its
+    ``tail`` of weight (None for the point probe, which compiles no quadrature at all)."""
     if isinstance(probe, PointProbe):
         pts = origin_local + ranges[..., None] * directions
         return field.los_local(pts, directions), None
@@ -193,8 +193,9 @@ def _beam_los(field, origin_local, directions, ranges, probe):
     node_ranges = ranges[..., None] + offsets
     pts = origin_local + node_ranges[..., None] * directions[:, None, :]
     los_q = field.los_local(pts, directions[:, None, :])
-    # no light returns from behind the lidar: drop nodes at range <= 0, renormalise the rest
-    ahead = node_ranges > 0
+    # no light returns from behind the lidar: cut the probe symmetrically at the lidar
+    # (|offset| < range, so it stays centred on the focus) and renormalise
+    ahead = jnp.abs(offsets) < ranges[..., None]
     kept = jnp.where(ahead, weights, 0)
     total = jnp.sum(kept, axis=-1)
     los = jnp.sum(jnp.where(ahead, kept * los_q, 0), axis=-1) / total
