@@ -3,9 +3,10 @@
 `scan_bounds` gives the axis-aligned box (absolute CFD coordinates) that holds every point
 `lidarjax.simulate` samples for a scan, mount(s), heights and probe: each beam's probe
 nodes from ``f - reach`` to ``f + reach`` with ``reach = min(max |offset|, f)`` (nodes
-beyond the probe's cut at the lidar get no weight, so they need no field) and, with ``point_reference=True``, the column above the
-lidar. `lidarjax.GridField.crop` then keeps those cells plus a one-cell interpolation margin
-on each side, and results on the crop equal the full field's bit for bit:
+beyond the probe's cut at the lidar get no weight, so they need no field) and, with
+``point_reference=True``, the column above the lidar. `lidarjax.GridField.crop` then keeps
+those cells plus a one-cell interpolation margin on each side, and results on the crop
+equal the full field's bit for bit:
 
 ```python
 lo, hi = lidarjax.scan_bounds(scan, mounts, heights, probe=probe)
