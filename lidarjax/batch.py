@@ -109,26 +109,35 @@ def stack_mounts(mounts: Sequence[Mount]) -> Mount:
     return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *mounts)
 
 
+def _is_stacked(field: AbstractField) -> bool:
+    """A stack from `stack_fields` (GridField: 5-D velocity; scenes: ``(s, 3)`` origin)."""
+    if isinstance(field, GridField):
+        return field.velocity.ndim == 5
+    return field.origin.ndim == 2
+
+
 def _n_stacked(stacked: AbstractField) -> int:
     if isinstance(stacked, GridField):
         return stacked.velocity.shape[0]
-    return jax.tree_util.tree_leaves(stacked)[0].shape[0]
+    return stacked.origin.shape[0]
 
 
-def _sectors(stacked, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference,
-             mount_axis, uref_axis):
-    grid = isinstance(stacked, GridField)
+def _sectors(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference,
+             field_axis, mount_axis, uref_axis):
+    grid = isinstance(field, GridField) and field_axis == 0
 
     def one(field_leaf, m, u):
-        field = unstack_field(stacked, field_leaf) if grid else field_leaf
-        return _simulate(field, scan, m, heights, u, probe, ratio_tol,
+        f = unstack_field(field, field_leaf) if grid else field_leaf
+        return _simulate(f, scan, m, heights, u, probe, ratio_tol,
                          point_reference=point_reference)
 
-    batched = stacked.velocity if grid else stacked
-    return jax.vmap(one, in_axes=(0, mount_axis, uref_axis))(batched, mount, u_ref)
+    batched = field.velocity if grid else field
+    return jax.vmap(one, in_axes=(field_axis, mount_axis, uref_axis))(batched, mount, u_ref)
 
 
-_sectors_jit = jax.jit(_sectors, static_argnames=("point_reference", "mount_axis", "uref_axis"))
+_sectors_jit = jax.jit(
+    _sectors, static_argnames=("point_reference", "field_axis", "mount_axis", "uref_axis")
+)
 
 
 def simulate_sectors(
@@ -146,8 +155,9 @@ def simulate_sectors(
 
     **Arguments:**
 
-    - `fields`: a list of fields of one kind and shape (one per sector), or a stack from
-      `stack_fields`.
+    - `fields`: a list of fields of one kind and shape (one per sector), a stack from
+      `stack_fields`, or one (unstacked) field shared by all sectors (then the sectors are
+      the mounts, e.g. one CFD run seen by a rotated platform).
     - `scan`, `heights`, `probe`, `point_reference`, `ratio_tol`: shared, as in `simulate`.
     - `mounts`: one `Mount` for all sectors, a list of one per sector, or a stacked `Mount`
       (e.g. the same lidar with the platform rotation `beta` of each CFD run).
@@ -157,33 +167,40 @@ def simulate_sectors(
     **Returns:** a `Simulation` whose every array has a leading sector axis ``s``
     (e.g. ``los`` is ``(s, h, b)``), equal to stacking `simulate` for each sector.
     """
-    stacked = fields if isinstance(fields, AbstractField) else stack_fields(fields)
-    n = _n_stacked(stacked)
+    field = fields if isinstance(fields, AbstractField) else stack_fields(fields)
+    field_axis = 0 if _is_stacked(field) else None
     if isinstance(mounts, Mount):
         mount = mounts
         mount_axis = 0 if mounts.location.ndim == 2 else None
     else:
         mount = stack_mounts(mounts)
         mount_axis = 0
-    if mount_axis == 0 and mount.location.shape[0] != n:
+    u_refs = None if u_refs is None else jnp.asarray(u_refs)
+    uref_axis = 0 if u_refs is not None and u_refs.ndim == 2 else None
+    sizes = {
+        "fields": _n_stacked(field) if field_axis == 0 else None,
+        "mounts": mount.location.shape[0] if mount_axis == 0 else None,
+        "u_refs": u_refs.shape[0] if uref_axis == 0 else None,
+    }
+    given = {k: v for k, v in sizes.items() if v is not None}
+    if not given:
         raise ValueError(
-            f"simulate_sectors: {mount.location.shape[0]} mounts for {n} sectors; give one "
-            f"mount per sector or a single shared Mount."
+            "simulate_sectors: nothing to batch; give a list or stack of fields, of mounts or "
+            "of u_refs (or call lidarjax.simulate)."
         )
-    uref_axis = None
-    if u_refs is not None:
-        u_refs = jnp.asarray(u_refs)
-        if u_refs.ndim == 2:
-            if u_refs.shape != (n, 3):
-                raise ValueError(
-                    f"simulate_sectors: u_refs must be (s, 3) = ({n}, 3) or (3,), got "
-                    f"{u_refs.shape}."
-                )
-            uref_axis = 0
+    n = max(given.values())
+    if any(v != n for v in given.values()):
+        raise ValueError(
+            f"simulate_sectors: sector counts differ ({given}); give one of each per sector "
+            f"or a single shared one. E.g. {sizes['mounts']} mounts for "
+            f"{sizes['fields']} sectors."
+        )
+    if u_refs is not None and u_refs.shape[-1:] != (3,):
+        raise ValueError(f"simulate_sectors: u_refs must be (s, 3) or (3,), got {u_refs.shape}.")
     if probe is None:
         probe = PointProbe()
     # validate one sector as `simulate` would, before compiling
-    first_field = unstack_field(stacked, 0)
+    first_field = unstack_field(field, 0) if field_axis == 0 else field
     first_mount = mount if mount_axis is None else jax.tree_util.tree_map(lambda x: x[0], mount)
     first_uref = None if u_refs is None else (u_refs if uref_axis is None else u_refs[0])
     _validate(first_field, scan, first_mount, heights, first_uref, probe)
@@ -191,7 +208,7 @@ def simulate_sectors(
     if not jnp.issubdtype(heights.dtype, jnp.floating):
         heights = heights.astype(first_field.dtype)
     return _sectors_jit(
-        stacked, scan, mount, heights, u_refs, probe, ratio_tol,
-        point_reference=point_reference, mount_axis=mount_axis, uref_axis=uref_axis,
+        field, scan, mount, heights, u_refs, probe, ratio_tol, point_reference=point_reference,
+        field_axis=field_axis, mount_axis=mount_axis, uref_axis=uref_axis,
     )
 

@@ -136,6 +136,10 @@ def test_simulate_sectors_matches_a_loop():
     shared = lj.simulate_sectors(stacked, scan, MOUNT, HEIGHTS, u_refs=U_REFS[0], probe=probe)
     one = lj.simulate(SECTOR_FIELDS[2], scan, MOUNT, HEIGHTS, u_ref=U_REFS[0], probe=probe)
     np.testing.assert_allclose(shared.lidar_velocity[2], one.lidar_velocity, rtol=1e-13)
+    # one field seen from several mounts
+    mounts = lj.simulate_sectors(FIELD, scan, SECTOR_MOUNTS, HEIGHTS, probe=probe)
+    one = lj.simulate(FIELD, scan, SECTOR_MOUNTS[1], HEIGHTS, probe=probe)
+    np.testing.assert_allclose(mounts.los[1], one.los, rtol=1e-13)
 
 
 def test_stack_fields_needs_one_grid():
@@ -144,8 +148,10 @@ def test_stack_fields_needs_one_grid():
         lj.stack_fields([FIELD, other])
     with pytest.raises(ValueError, match="one type"):
         lj.stack_fields([FIELD, HILL])
-    with pytest.raises(ValueError, match="mounts for 3 sectors"):
+    with pytest.raises(ValueError, match="2 mounts for 3 sectors"):
         lj.simulate_sectors(SECTOR_FIELDS, lj.windcube_v1(), SECTOR_MOUNTS[:2], HEIGHTS)
+    with pytest.raises(ValueError, match="nothing to batch"):
+        lj.simulate_sectors(FIELD, lj.windcube_v1(), MOUNT, HEIGHTS)
     scenes = lj.stack_fields([lj.scenes.hill(direction=d) for d in DIRECTIONS])
     assert scenes.direction.shape == (3,)
     assert float(lj.unstack_field(scenes, 1).direction) == 250.0
