@@ -199,7 +199,8 @@ def _beam_los(field, origin_local, directions, ranges, probe):
     kept = jnp.where(ahead, weights, 0)
     total = jnp.sum(kept, axis=-1)
     los = jnp.sum(jnp.where(ahead, kept * los_q, 0), axis=-1) / total
-    truncated = (1 - total) > probe.tail.astype(ranges.dtype)
+    tail = jnp.asarray(getattr(probe, "tail", 0.0)).astype(ranges.dtype)
+    truncated = (1 - total) > tail
     return los, truncated
 
 

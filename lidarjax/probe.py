@@ -93,6 +93,10 @@ class AbstractProbe(eqx.Module):
     - ``weight(offset, focus_range)``: the continuous weighting, unit integral over the line.
     - ``support(focus_range)``: half-width of the truncated support (0 for a point).
     - ``scaled(factor)``: the same probe with every length divided by `factor`.
+
+    A probe may also carry ``tail``, the weight it already leaves outside its truncated
+    support; `simulate` flags a height only when the cut at the lidar drops more than that
+    (0 when absent). Nodes must be symmetric about the focus.
     """
 
     @abc.abstractmethod
