@@ -2,8 +2,8 @@
 
 What it measures: a Windcube V2 (28 degree cone) with the default pulsed probe
 (`lidarjax.PulsedProbe`: 26.2 m pulse, 25 m gate) at 9 heights from 40 to 200 m, seen from
-36 mounts (platform rotations every 10 degrees, the "sectors"), in two scenes gridded the
-way a CFD field is (cell ``dx`` horizontally, ``dx/2`` vertically):
+360 mounts (platform rotations every degree, the "sectors"; 36 with ``--quick``), in two
+scenes gridded the way a CFD field is (cell ``dx`` horizontally, ``dx/2`` vertically):
 
 - **shear**: `lidarjax.scenes.power_law` (10 m/s at 100 m, alpha 0.2, veer 0.05 deg/m), lidar
   on flat ground;
@@ -19,7 +19,7 @@ around the default (dx = 5 m, 9 nodes, float64):
 - float32 against float64;
 - grid spacing dx = 20, 10, 5, 2.5 m.
 
-Time is the median wall time of one compiled call for all 36 x 9 x 5 beams (compile time
+Time is the median wall time of one compiled call for all 360 x 9 x 5 beams (compile time
 excluded). Run ``python benchmarks/accuracy_vs_time.py [--quick]``; writes
 ``benchmarks/results/accuracy_vs_time.json``, ``.png`` (Pareto plot) and ``.md`` (table).
 """
@@ -44,7 +44,6 @@ import lidarjax as lj  # noqa: E402
 RESULTS = Path(__file__).resolve().parent / "results"
 HEIGHTS = np.linspace(40.0, 200.0, 9)
 SCAN = lj.windcube_v2(28.0)
-SECTORS = 36
 REF_NODES = 257
 
 SCENES = {
@@ -110,13 +109,14 @@ def main():
     parser.add_argument("--quick", action="store_true", help="fewer configurations (< 1 min)")
     args = parser.parse_args()
     repeats = 3 if args.quick else 7
+    sectors = 36 if args.quick else 360
     node_counts = (1, 3, 9, 33) if args.quick else (1, 3, 5, 9, 17, 33, 65)
     spacings = (20.0, 10.0, 5.0) if args.quick else (20.0, 10.0, 5.0, 2.5)
     rows = []
     for name, cfg in SCENES.items():
         scene = cfg["scene"]
-        mounts = lj.stack_mounts(
-            [lj.Mount(cfg["lidar"], beta=b, psi=180.0) for b in np.arange(SECTORS) * 10.0])
+        betas = np.arange(sectors) * 360.0 / sectors
+        mounts = lj.stack_mounts([lj.Mount(cfg["lidar"], beta=b, psi=180.0) for b in betas])
         _, *truth = run_config(scene, mounts, REF_NODES, 1)
         _, *effect = run_config(scene, mounts, 1, 1)  # the point probe: no volume at all
         volume_effect = errors(*effect, truth)[0]
@@ -145,7 +145,7 @@ def main():
                        time_ms=1e3 * t, speed_error=e_speed, direction_error=e_dir,
                        speed_error_vs_257_same_grid=q_speed,
                        direction_error_vs_257_same_grid=q_dir,
-                       samples=SECTORS * HEIGHTS.size * SCAN.n_beams * nodes,
+                       sectors=sectors, samples=sectors * HEIGHTS.size * SCAN.n_beams * nodes,
                        probe_volume_effect=volume_effect,
                        field_mbytes=field.nbytes / 1e6)
             rows.append(row)
@@ -153,7 +153,7 @@ def main():
                   f"{row['time_ms']:7.2f} ms  speed err {e_speed:.2e} m/s "
                   f"(quadrature {q_speed:.2e})  dir err {e_dir:.2e} deg")
     RESULTS.mkdir(exist_ok=True)
-    meta = dict(heights=HEIGHTS.tolist(), sectors=SECTORS, reference_nodes=REF_NODES,
+    meta = dict(heights=HEIGHTS.tolist(), sectors=sectors, reference_nodes=REF_NODES,
                 scan="windcube_v2(28)", probe="PulsedProbe() defaults", quick=args.quick,
                 repeats=repeats, cpu_count=os.cpu_count(), jax=jax.__version__)
     with open(RESULTS / "accuracy_vs_time.json", "w") as fh:
@@ -166,7 +166,8 @@ def main():
 def write_table(rows, path):
     lines = [
         "<!-- written by benchmarks/accuracy_vs_time.py -->",
-        f"Windcube V2 + `PulsedProbe()`, {SECTORS} sectors x {HEIGHTS.size} heights; errors are "
+        f"Windcube V2 + `PulsedProbe()`, {rows[0]['sectors']} sectors x {HEIGHTS.size} heights; "
+        "errors are "
         "the largest over sectors and heights against the analytic scene with a "
         f"{REF_NODES}-node probe (float64); *quadrature* is against {REF_NODES} nodes on the "
         "same grid. Time: one compiled call, median.",
@@ -209,7 +210,7 @@ def plot(rows, path):
         front = pareto([(r["time_ms"], r["speed_error"]) for r in sel])
         ax.loglog(*zip(*front, strict=True), "k-", lw=0.8, alpha=0.5, label="Pareto front")
         ax.set(xlabel="time per call (ms)", ylabel="max horizontal speed error (m/s)",
-               title=f"{scene}: {SECTORS} sectors x {HEIGHTS.size} heights, V2 + pulsed")
+               title=f"{scene}: {sel[0]['sectors']} sectors x {HEIGHTS.size} heights, V2 + pulsed")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
