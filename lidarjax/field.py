@@ -304,6 +304,11 @@ class GridField(AbstractField):
         and upper ``z`` node of the columns ``(i, j), (i, j+1), (i+1, j), (i+1, j+1)``, the
         fractions ``(tx, ty, tz)`` and the inside mask."""
         _, ny, nz = self.shape
+        if self.velocity.size >= 2**31:
+            raise ValueError(
+                f"GridField: {self.velocity.size} velocity values exceed the int32 flat index "
+                f"of the kernel; crop the field (GridField.crop) or split it."
+            )
         (i, tx, ix), (j, ty, iy), (k, tz, iz) = (
             self._axis_index(a, points[..., a]) for a in range(3)
         )
