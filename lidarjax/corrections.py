@@ -35,15 +35,21 @@ DEFAULT_RATIO_TOL = 1e-4
 
 
 def _norm(v):
+    """3-D norm, zero where its square underflows (so its own gradient stays finite)."""
     sq = jnp.sum(v * v, axis=-1)
-    pos = sq > 0
+    pos = sq > jnp.finfo(sq.dtype).tiny
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
 def _ratio(num, den, scale, tol):
-    ok = jnp.abs(den) > tol * scale
-    safe = jnp.where(ok, den, 1.0)
-    return jnp.where(ok, num / safe, jnp.nan)
+    """``num / den``, NaN unless ``scale > 0`` and ``|den| > tol * scale``.
+
+    Both are divided by `scale` first, so the derivative never squares a tiny denominator.
+    """
+    ok = (scale > 0) & (jnp.abs(den) > tol * scale)
+    s = jnp.where(ok, scale, 1.0)
+    safe = jnp.where(ok, den / s, 1.0)
+    return jnp.where(ok, (num / s) / safe, jnp.nan)
 
 
 def correction_factors(
@@ -75,7 +81,7 @@ def correction_factors(
         u_f = horizontal_speed(free_b)
         out["cff_u"] = _ratio(free_b[..., 0], lidar[..., 0], scale, ratio_tol)
         out["cff_v"] = _ratio(free_b[..., 1], lidar[..., 1], scale, ratio_tol)
-        out["cff_w"] = _ratio(free_b[..., 2] - lidar[..., 2], u_f, 1.0, 0.0)
+        out["cff_w"] = _ratio(free_b[..., 2] - lidar[..., 2], u_f, u_f, 0.0)
         out["cff_U"] = _ratio(u_f, u_l, scale, ratio_tol)
         out["cff_th"] = direction_difference(free_b, lidar)
     names = ("cfp_u", "cfp_v", "cfp_w", "cfp_U", "cfp_th")

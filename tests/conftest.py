@@ -3,3 +3,12 @@
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+import os
+
+from hypothesis import settings
+
+# CI runs are reproducible: the same examples every run (locally hypothesis explores freely).
+settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
+settings.register_profile("dev", deadline=None, print_blob=True)
+settings.load_profile("ci" if os.environ.get("CI") else "dev")
