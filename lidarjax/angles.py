@@ -45,7 +45,7 @@ def _unit(u, v, calm):
     return su / n, sv / n
 
 
-def horizontal_speed(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
+def horizontal_speed(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     """Horizontal speed ``sqrt(u**2 + v**2)`` in the units of ``velocity`` (m/s).
 
     Gradient-safe: at exactly zero speed the value is 0 and its gradient is 0 (not NaN).
@@ -64,7 +64,7 @@ def horizontal_speed(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]
     return jnp.where(calm, jnp.zeros_like(u), jnp.sqrt(su * su + sv * sv))
 
 
-def wind_direction(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
+def wind_direction(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     """Meteorological wind direction in degrees, ``[0, 360)``.
 
     The direction the wind comes **from**, clockwise from ``+y`` (north of the frame the
@@ -91,7 +91,7 @@ def wind_direction(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
     return jnp.where(calm, jnp.nan, d)
 
 
-def wrap180(angle: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
+def wrap180(angle: Float[ArrayLike, ...]) -> Float[Array, ...]:
     """Wrap angles in degrees to ``(-180, 180]``."""
     angle = jnp.asarray(angle)
     return 180.0 - jnp.mod(180.0 - angle, 360.0)
@@ -99,7 +99,7 @@ def wrap180(angle: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
 
 def direction_difference(
     to: Float[ArrayLike, "... 3"], frm: Float[ArrayLike, "... 3"]
-) -> Float[Array, "..."]:
+) -> Float[Array, ...]:
     """Direction addend ``direction(to) - direction(frm)`` in degrees, in ``(-180, 180]``.
 
     Computed from the cross and dot products of the horizontal parts (no subtraction of
@@ -126,7 +126,7 @@ def direction_difference(
     return jnp.where(calm, jnp.nan, d)
 
 
-def seed_azimuth(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
+def seed_azimuth(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     """The seed UDF's flow azimuth in degrees, ``[0, 360)``: heading clockwise from ``+x``.
 
     The UDF computes it piecewise from ``atan(v/u)`` (dividing by zero for ``u = 0``);

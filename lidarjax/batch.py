@@ -146,7 +146,7 @@ def simulate_sectors(
     mounts: Mount | Sequence[Mount],
     heights: Float[ArrayLike, " h"],
     *,
-    u_refs: Float[ArrayLike, "s 3"] | Float[ArrayLike, "3"] | None = None,
+    u_refs: Float[ArrayLike, "s 3"] | Float[ArrayLike, 3] | None = None,
     probe: AbstractProbe | None = None,
     point_reference: bool = True,
     ratio_tol: float = DEFAULT_RATIO_TOL,

@@ -55,7 +55,7 @@ def _ratio(num, den, scale, tol):
 def correction_factors(
     lidar: Float[Array, "h 3"],
     point: Float[Array, "h 3"] | None,
-    free: Float[Array, "3"] | None,
+    free: Float[Array, 3] | None,
     ratio_tol: float | Float[Array, ""] = DEFAULT_RATIO_TOL,
 ) -> dict[str, Float[Array, " h"] | None]:
     """The ten correction factors (``None`` for those whose reference is not given).

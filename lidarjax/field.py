@@ -36,8 +36,8 @@ class AbstractField(eqx.Module):
     Subclasses define `origin`, `origin_lo` and `sample_local`.
     """
 
-    origin: eqx.AbstractVar[Float[Array, "3"]]
-    origin_lo: eqx.AbstractVar[Float[Array, "3"]]
+    origin: eqx.AbstractVar[Float[Array, 3]]
+    origin_lo: eqx.AbstractVar[Float[Array, 3]]
 
     @property
     def dtype(self):
@@ -60,7 +60,7 @@ class AbstractField(eqx.Module):
 
     def los_local(
         self, points: Float[Array, "... 3"], directions: Float[Array, "... 3"]
-    ) -> Float[Array, "..."]:
+    ) -> Float[Array, ...]:
         """Velocity at local points projected on unit `directions` (m/s, + along direction)."""
         return jnp.sum(self.sample_local(points) * directions, axis=-1)
 
@@ -116,8 +116,8 @@ class GridField(AbstractField):
     is four small contiguous loads per point, which XLA fuses with the index arithmetic.
     """
 
-    origin: Float[Array, "3"]
-    origin_lo: Float[Array, "3"]
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
     x_local: Float[Array, " nx"]
     y_local: Float[Array, " ny"]
     z_local: Float[Array, " nz"]
@@ -125,8 +125,8 @@ class GridField(AbstractField):
     # Uniform axes: ``p * index_scale`` is the fractional node index in the numbering of the
     # grid the nodes came from ((nodes - 1) / extent of that grid) and `index_start` the
     # (integer-valued) number of this grid's first node there: 0 unless made by `crop`.
-    index_scale: Float[Array, "3"]
-    index_start: Float[Array, "3"]
+    index_scale: Float[Array, 3]
+    index_start: Float[Array, 3]
     uniform: tuple[bool, bool, bool] = eqx.field(static=True)
 
     def __init__(self, x, y, z, velocity, *, uniform=None):
@@ -136,7 +136,7 @@ class GridField(AbstractField):
         dtype = velocity.dtype
         axes = (x, y, z)
         if is_concrete(x, y, z):
-            arrays = [_check_axis(n, a) for n, a in zip("xyz", axes)]
+            arrays = [_check_axis(n, a) for n, a in zip("xyz", axes, strict=True)]
             shape = tuple(a.size for a in arrays)
             if velocity.shape != (*shape, 3):
                 raise ValueError(
@@ -222,7 +222,7 @@ class GridField(AbstractField):
         return cls(xs[0], xs[1], xs[2], jnp.asarray(vel, dtype=dtype))
 
     # -- cropping -----------------------------------------------------------------------
-    def crop(self, lo: Float[ArrayLike, "3"], hi: Float[ArrayLike, "3"]) -> GridField:
+    def crop(self, lo: Float[ArrayLike, 3], hi: Float[ArrayLike, 3]) -> GridField:
         """The sub-grid covering the box ``[lo, hi]`` (absolute CFD metres) plus one cell.
 
         Keeps the nodes bracketing ``[lo, hi]`` on each axis and one more node beyond each
@@ -357,7 +357,7 @@ class GridField(AbstractField):
 
     def los_local(
         self, points: Float[Array, "... 3"], directions: Float[Array, "... 3"]
-    ) -> Float[Array, "..."]:
+    ) -> Float[Array, ...]:
         """Trilinear velocity projected on unit `directions` (m/s), projected at the corners
         so the gather, the dot product and the lerps fuse into one loop."""
         points = jnp.asarray(points).astype(self.dtype)

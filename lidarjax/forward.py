@@ -52,7 +52,7 @@ class Simulation(eqx.Module):
     los: Float[Array, "h b"]
     lidar_velocity: Float[Array, "h 3"]
     point_velocity: Float[Array, "h 3"] | None
-    free_velocity: Float[Array, "3"] | None
+    free_velocity: Float[Array, 3] | None
     cff_u: Float[Array, " h"] | None
     cff_v: Float[Array, " h"] | None
     cff_w: Float[Array, " h"] | None
@@ -139,7 +139,7 @@ def simulate(
     mount: Mount,
     heights: Float[ArrayLike, " h"],
     *,
-    u_ref: Float[ArrayLike, "3"] | None = None,
+    u_ref: Float[ArrayLike, 3] | None = None,
     probe: AbstractProbe | None = None,
     point_reference: bool = True,
     ratio_tol: float = DEFAULT_RATIO_TOL,

@@ -31,8 +31,8 @@ class Mount(eqx.Module):
     See `lidarjax.frames` for the chain these angles define.
     """
 
-    location: Float[Array, "3"]
-    location_lo: Float[Array, "3"]
+    location: Float[Array, 3]
+    location_lo: Float[Array, 3]
     beta: Float[Array, ""]
     gamma: Float[Array, ""]
     psi: Float[Array, ""]
@@ -40,7 +40,7 @@ class Mount(eqx.Module):
 
     def __init__(
         self,
-        location: Float[ArrayLike, "3"],
+        location: Float[ArrayLike, 3],
         beta: Float[ArrayLike, ""] = 0.0,
         gamma: Float[ArrayLike, ""] = 0.0,
         psi: Float[ArrayLike, ""] = 0.0,

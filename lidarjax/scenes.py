@@ -13,7 +13,6 @@ unless given as arrays of another float dtype).
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -28,7 +27,7 @@ def _f(value, dtype):
     return jnp.asarray(value, dtype=dtype)
 
 
-def heading(direction_deg, dtype=None) -> Float[Array, "3"]:
+def heading(direction_deg, dtype=None) -> Float[Array, 3]:
     """Unit horizontal vector the wind blows *towards* for a meteorological direction."""
     d = jnp.deg2rad(jnp.asarray(direction_deg, dtype=dtype))
     return jnp.stack([-jnp.sin(d), -jnp.cos(d), jnp.zeros_like(d)])
@@ -41,8 +40,8 @@ def _dtype(dtype):
 class Uniform(AbstractField):
     """A uniform wind: `speed` (m/s) from meteorological `direction` (degrees), vertical `w`."""
 
-    origin: Float[Array, "3"]
-    origin_lo: Float[Array, "3"]
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
     speed: Float[Array, ""]
     direction: Float[Array, ""]
     w: Float[Array, ""]
@@ -69,8 +68,8 @@ class PowerLaw(AbstractField):
     clockwise with height as in the northern-hemisphere Ekman spiral). NaN below ground.
     """
 
-    origin: Float[Array, "3"]
-    origin_lo: Float[Array, "3"]
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
     speed_ref: Float[Array, ""]
     z_ref: Float[Array, ""]
     alpha: Float[Array, ""]
@@ -112,9 +111,9 @@ class Linear(AbstractField):
     ``gradient[i, j] = dV_i / dx_j`` in 1/s. Trilinear interpolation reproduces it exactly.
     """
 
-    origin: Float[Array, "3"]
-    origin_lo: Float[Array, "3"]
-    velocity: Float[Array, "3"]
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
+    velocity: Float[Array, 3]
     gradient: Float[Array, "3 3"]
 
     def sample_local(self, points):
@@ -122,9 +121,9 @@ class Linear(AbstractField):
 
 
 def linear(
-    velocity: Float[ArrayLike, "3"],
+    velocity: Float[ArrayLike, 3],
     gradient: Float[ArrayLike, "3 3"],
-    point: Float[ArrayLike, "3"] = (0.0, 0.0, 0.0),
+    point: Float[ArrayLike, 3] = (0.0, 0.0, 0.0),
     *,
     dtype=None,
 ) -> Linear:
@@ -143,8 +142,8 @@ class Hemisphere(AbstractField):
     ground. Speed-up at the top is 1.5. NaN inside the body (``|r| < R``) and below ground.
     """
 
-    origin: Float[Array, "3"]
-    origin_lo: Float[Array, "3"]
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
     radius: Float[Array, ""]
     speed: Float[Array, ""]
     direction: Float[Array, ""]
@@ -167,7 +166,7 @@ def hemisphere(
     radius: float = 20.0,
     speed: float = 10.0,
     direction: float = 270.0,
-    centre: Float[ArrayLike, "3"] = (0.0, 0.0, 0.0),
+    centre: Float[ArrayLike, 3] = (0.0, 0.0, 0.0),
     *,
     dtype=None,
 ) -> Hemisphere:
@@ -193,8 +192,8 @@ class Hill(AbstractField):
     component is unchanged. NaN below the terrain. Valid for gentle slopes (``H/L < ~0.3``).
     """
 
-    origin: Float[Array, "3"]
-    origin_lo: Float[Array, "3"]
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
     height: Float[Array, ""]
     half_width: Float[Array, ""]
     speed: Float[Array, ""]
@@ -229,7 +228,7 @@ def hill(
     speed: float = 10.0,
     direction: float = 270.0,
     ridge_normal: float = 90.0,
-    crest: Float[ArrayLike, "3"] = (0.0, 0.0, 0.0),
+    crest: Float[ArrayLike, 3] = (0.0, 0.0, 0.0),
     *,
     dtype=None,
 ) -> Hill:

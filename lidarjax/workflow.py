@@ -9,12 +9,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .angles import horizontal_speed, seed_azimuth
+from .batch import simulate_sectors, stack_fields
 from .field import GridField
 from .forward import Simulation, simulate
 from .io.settings import Settings
@@ -51,17 +51,6 @@ def seed_columns(sim: Simulation) -> dict[str, np.ndarray]:
     return {k: np.asarray(v, dtype=np.float64) for k, v in cols.items()}
 
 
-def _same_grid(fields: Sequence[GridField]) -> bool:
-    f0 = fields[0]
-    return all(
-        f.shape == f0.shape and f.uniform == f0.uniform and f.velocity.dtype == f0.velocity.dtype
-        and all(np.array_equal(np.asarray(a), np.asarray(b)) for a, b in (
-            (f.x_local, f0.x_local), (f.y_local, f0.y_local), (f.z_local, f0.z_local),
-            (f.origin, f0.origin), (f.origin_lo, f0.origin_lo)))
-        for f in fields[1:]
-    )
-
-
 def simulate_settings(
     settings: Settings,
     betas: Sequence[float],
@@ -91,16 +80,12 @@ def simulate_settings(
                     epsilon=settings.epsilon) for b in betas]
     heights = jnp.asarray(settings.heights())
     fields = [field_for_beta(b) for b in betas]
-    if len(fields) > 1 and _same_grid(fields):
-        f0 = fields[0]
-        stacked_vel = jnp.stack([f.velocity for f in fields])
-        stacked_mount = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *mounts)
-
-        def one(vel, mount):
-            field = eqx.tree_at(lambda f: f.velocity, f0, vel)
-            return simulate(field, scan, mount, heights, u_ref=u_ref, probe=probe)
-
-        batch = jax.vmap(one)(stacked_vel, stacked_mount)
-        return {b: jax.tree_util.tree_map(lambda a, i=i: a[i], batch) for i, b in enumerate(betas)}
-    return {b: simulate(f, scan, m, heights, u_ref=u_ref, probe=probe)
-            for b, f, m in zip(betas, fields, mounts)}
+    try:
+        stacked = stack_fields(fields) if len(fields) > 1 else None
+    except ValueError:  # runs on different grids: one call (and compilation) per grid
+        stacked = None
+    if stacked is None:
+        return {b: simulate(f, scan, m, heights, u_ref=u_ref, probe=probe)
+                for b, f, m in zip(betas, fields, mounts, strict=True)}
+    batch = simulate_sectors(stacked, scan, mounts, heights, u_refs=u_ref, probe=probe)
+    return {b: jax.tree_util.tree_map(lambda a, i=i: a[i], batch) for i, b in enumerate(betas)}

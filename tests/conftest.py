@@ -1,12 +1,11 @@
 """Test configuration: float64 everywhere unless a test is about float32."""
 
-import jax
-
-jax.config.update("jax_enable_x64", True)
-
 import os
 
+import jax
 from hypothesis import settings
+
+jax.config.update("jax_enable_x64", True)
 
 # CI runs are reproducible: the same examples every run (locally hypothesis explores freely).
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)

@@ -18,7 +18,7 @@ def tree_allclose(a, b, rtol=RTOL64, atol=ATOL64) -> bool:
         return False
     return all(
         np.allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=atol, equal_nan=True)
-        for x, y in zip(la, lb)
+        for x, y in zip(la, lb, strict=True)
     )
 
 

@@ -242,7 +242,7 @@ def test_gradients_match_finite_differences():
 
     def f(flat):
         parts = jnp.split(flat, np.cumsum(sizes)[:-1])
-        return loss(tuple(p.reshape(np.shape(q)) for p, q in zip(parts, PARAMS)))
+        return loss(tuple(p.reshape(np.shape(q)) for p, q in zip(parts, PARAMS, strict=True)))
 
     assert_grad_matches_fd(jax.jit(f), flat0, eps=1e-6, rtol=2e-6, atol=1e-7)
 

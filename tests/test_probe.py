@@ -96,7 +96,7 @@ def test_pulsed_los_in_a_quadratic_field_converges_to_the_second_moment():
         probe = lj.PulsedProbe(n_nodes=q, tail=1e-10)
         moment = (_probe_los(field, probe, focus) - point) / 1e-3
         errors.append(abs(moment / float(probe.variance()) - 1))
-    assert all(b <= a for a, b in zip(errors, errors[1:], strict=False))
+    assert all(b <= a for a, b in zip(errors[:-1], errors[1:], strict=True))
     assert errors[-1] < 1e-9
     # with the default tail the documented 0.17 % deficit of the second moment
     probe = lj.PulsedProbe(n_nodes=33)

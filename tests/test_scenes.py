@@ -63,11 +63,9 @@ def test_hill_linear_theory():
 
     e1, e2 = tangency_error(10.0), tangency_error(5.0)
     assert e1 < 0.1 and e2 / e1 == pytest.approx(0.5, rel=0.1)
-    # linear theory's crest speed-up H/L, from the formula at the datum
-    zeta = 0.0 + 0.0j
-    assert (1 + (h * lh / (lh - 1j * zeta) ** 2).real / 1.0 / 1.0) == pytest.approx(1 + h / lh)
     assert np.all(np.isfinite(v))
-    pts = np.stack([RNG.uniform(-900, 900, 30), RNG.uniform(-50, 50, 30), RNG.uniform(45, 300, 30)], -1)
+    pts = np.stack([RNG.uniform(-900, 900, 30), RNG.uniform(-50, 50, 30),
+                    RNG.uniform(45, 300, 30)], -1)
     jac = np.asarray(jacobian_at(scene, pts))
     np.testing.assert_allclose(np.trace(jac, axis1=1, axis2=2), 0.0, atol=1e-12)
     np.testing.assert_allclose(jac, np.transpose(jac, (0, 2, 1)), atol=1e-12)
