@@ -1,0 +1,165 @@
+"""Report figures (matplotlib is an optional extra: ``pip install lidarjax[plot]``).
+
+Each function draws one figure, saves it to `path` (PNG unless the suffix says otherwise)
+and returns the path. None of them is needed by the numerical core.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["plot_profiles", "plot_los_fit", "plot_roses", "plot_sensitivity", "sensitivity_map"]
+
+_COLOURS = {"point": "k", "windcube_v1": "C0", "windcube_v2": "C1", "zephir": "C2"}
+_LABELS = {"point": "point above the lidar", "windcube_v1": "Windcube V1",
+           "windcube_v2": "Windcube V2", "zephir": "ZephIR"}
+
+
+def _pyplot():
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as err:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "lidarjax plots need matplotlib: pip install 'lidarjax[plot]'") from err
+    return plt
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    fig.savefig(tmp, dpi=110, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
+    tmp.replace(path)
+    return path
+
+
+def plot_profiles(z_over_h, c_u: dict, dtheta: dict, path, *, title=None) -> Path:
+    """C_U = U / U_free and the direction error against z / H (seed 003, figure 4).
+
+    **Arguments:** `z_over_h` ``(h,)``; `c_u` and `dtheta` map a name ('point',
+    'windcube_v1', ...) to arrays ``(s, h)`` over inflow directions (the line is the mean,
+    the band the range); `dtheta` in degrees.
+    """
+    plt = _pyplot()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 5), sharey=True)
+    for name, values in c_u.items():
+        col = _COLOURS.get(name, None)
+        v = np.asarray(values)
+        ax1.plot(v.mean(0), z_over_h, "-o", color=col, label=_LABELS.get(name, name), ms=4)
+        ax1.fill_betweenx(z_over_h, v.min(0), v.max(0), color=col, alpha=0.12)
+        d = np.asarray(dtheta[name])
+        ax2.plot(d.mean(0), z_over_h, "-o", color=col, ms=4)
+        ax2.fill_betweenx(z_over_h, d.min(0), d.max(0), color=col, alpha=0.12)
+    ax1.axvline(1.0, color="0.6", lw=0.8)
+    ax2.axvline(0.0, color="0.6", lw=0.8)
+    ax1.set_xlabel("$C_U = U / U_{free}$")
+    ax2.set_xlabel(r"$\Delta\theta = \theta_{free} - \theta$ (deg)")
+    ax1.set_ylabel("z / H")
+    ax1.legend(loc="best", fontsize=8)
+    for ax in (ax1, ax2):
+        ax.grid(alpha=0.3)
+    fig.suptitle(title or "mean over inflow directions (band: range)")
+    return _save(fig, path)
+
+
+def plot_los_fit(azimuths, los, fitted_velocity, cone_angle, path, *, title=None) -> Path:
+    """LOS against scan azimuth with the fitted sine (seed 003, figure 2).
+
+    **Arguments:** `azimuths` ``(b,)`` degrees; `los` ``(b,)`` m/s; `fitted_velocity`
+    ``(3,)`` the reconstructed ``(u, v, w)`` in the lidar frame; `cone_angle` degrees.
+    The curve is ``u sin c sin a + v sin c cos a + w cos c``.
+    """
+    plt = _pyplot()
+    a = np.linspace(0.0, 360.0, 361)
+    c = np.radians(cone_angle)
+    u, v, w = np.asarray(fitted_velocity)
+    curve = u * np.sin(c) * np.sin(np.radians(a)) + v * np.sin(c) * np.cos(np.radians(a)) \
+        + w * np.cos(c)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(a, curve, "-", color="C0", label="fitted sine (reconstruction)")
+    ax.plot(np.asarray(azimuths), np.asarray(los), "o", color="C3", ms=4, label="LOS in the flow")
+    ax.set_xlabel("scan azimuth (deg, clockwise from lidar +y)")
+    ax.set_ylabel("LOS velocity (m/s, + away)")
+    ax.set_xlim(0, 360)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title or "ZephIR conical scan")
+    return _save(fig, path)
+
+
+def plot_roses(directions, speed_ratio, direction_addend, labels, path, *, title=None) -> Path:
+    """Correction roses: speed ratio and direction addend against direction, polar axes.
+
+    **Arguments:** `directions` ``(d,)`` meteorological degrees; `speed_ratio` and
+    `direction_addend` ``(d, h)`` (addend in degrees); `labels` one per column ``h``.
+    """
+    plt = _pyplot()
+    fig = plt.figure(figsize=(11, 5))
+    th = np.radians(np.append(directions, directions[0]))
+    for k, (data, name) in enumerate(((speed_ratio, "speed ratio U_free / U_lidar"),
+                                      (direction_addend, "direction addend (deg)"))):
+        ax = fig.add_subplot(1, 2, k + 1, projection="polar")
+        ax.set_theta_zero_location("N")
+        ax.set_theta_direction(-1)
+        d = np.asarray(data)
+        for j, lab in enumerate(labels):
+            ax.plot(th, np.append(d[:, j], d[0, j]), lw=1.2, label=str(lab))
+        ax.set_title(name, fontsize=10)
+    fig.axes[0].legend(loc="lower left", bbox_to_anchor=(-0.25, -0.15), fontsize=7)
+    fig.suptitle(title or "correction roses against inflow direction")
+    return _save(fig, path)
+
+
+def sensitivity_map(field, scan, mount, height, *, u_ref=None, probe=None):
+    """Gradient of the lidar's horizontal-speed error with respect to the field values.
+
+    The error is ``U_lidar - U_point`` at one `height` (m), or ``U_lidar - U_free`` with
+    `u_ref`. Returns ``(nx, ny, nz)`` magnitudes ``|d error / d V_node|`` (per m/s of node
+    velocity; dimensionless): which part of the flow drives the error.
+    """
+    import equinox as eqx
+
+    from .forward import simulate
+
+    def error(vel):
+        f = eqx.tree_at(lambda fld: fld.velocity, field, vel)
+        sim = simulate(f, scan, mount, jnp.atleast_1d(height), u_ref=u_ref, probe=probe,
+                       point_reference=u_ref is None)
+        ref = sim.free_speed if u_ref is not None else sim.point_speed[0]
+        return sim.lidar_speed[0] - ref
+
+    g = jax.grad(error)(field.velocity)
+    return np.asarray(jnp.linalg.norm(g, axis=-1))
+
+
+def plot_sensitivity(field, sensitivity, mount_location, height, path, *, title=None) -> Path:
+    """Two slices of a `sensitivity_map`: horizontal at the lidar's measurement height and
+    vertical through the lidar (summed over the other axis), in CFD metres."""
+    plt = _pyplot()
+    x, y, z = (np.asarray(a) for a in (field.x, field.y, field.z))
+    s = np.asarray(sensitivity)
+    iz = int(np.argmin(np.abs(z - (mount_location[2] + height))))
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    m1 = ax1.pcolormesh(x, y, s[:, :, iz].T, shading="auto", cmap="magma")
+    ax1.plot(mount_location[0], mount_location[1], "c^", ms=8, label="lidar")
+    ax1.set_aspect("equal")
+    ax1.set_xlabel("x (m)")
+    ax1.set_ylabel("y (m)")
+    ax1.set_title(f"horizontal slice z = {z[iz]:.1f} m")
+    ax1.legend(fontsize=8)
+    fig.colorbar(m1, ax=ax1, label="|d(U_lidar - U_ref) / dV| per node")
+    m2 = ax2.pcolormesh(x, z, s.sum(axis=1).T, shading="auto", cmap="magma")
+    ax2.plot(mount_location[0], mount_location[2], "c^", ms=8)
+    ax2.set_xlabel("x (m)")
+    ax2.set_ylabel("z (m)")
+    ax2.set_title("summed over y")
+    fig.colorbar(m2, ax=ax2)
+    fig.suptitle(title or "where the flow drives the lidar's speed error")
+    return _save(fig, path)
