@@ -25,6 +25,8 @@ from .probe import AbstractProbe as AbstractProbe
 from .probe import CWProbe as CWProbe
 from .probe import PointProbe as PointProbe
 from .probe import PulsedProbe as PulsedProbe
+from .response import PeriodicSpline as PeriodicSpline
+from .response import ResponseTable as ResponseTable
 from .scan import Scan as Scan
 from .scan import reconstruct as reconstruct
 from .scan import windcube_v1 as windcube_v1
