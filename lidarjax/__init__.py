@@ -20,6 +20,10 @@ from .flags import Flag as Flag
 from .footprint import scan_bounds as scan_bounds
 from .forward import Simulation as Simulation
 from .forward import simulate as simulate
+from .inverse import InverseFlag as InverseFlag
+from .inverse import Inversion as Inversion
+from .inverse import invert as invert
+from .inverse import invert_reconstructed as invert_reconstructed
 from .mount import Mount as Mount
 from .probe import AbstractProbe as AbstractProbe
 from .probe import CWProbe as CWProbe
