@@ -168,6 +168,11 @@ def _check_columns(name: str, arr: np.ndarray, knots: np.ndarray) -> None:
         raise ValueError(f"ResponseTable: `{name}` contains inf.")
 
 
+@eqx.filter_jit
+def _sample(field, points):
+    return field.sample(points)
+
+
 class ResponseTable(eqx.Module):
     """What a lidar measures per unit free-stream speed, tabulated against inflow direction.
 
@@ -447,7 +452,8 @@ class ResponseTable(eqx.Module):
                         f"ResponseTable.from_simulations: `fields` needs one field per run ({s})."
                     )
                 vel = np.stack(
-                    [np.asarray(f.sample(stacked.points[i]), np.float64) for i, f in enumerate(fields)]
+                    [np.asarray(_sample(f, stacked.points[i]), np.float64)
+                     for i, f in enumerate(fields)]
                 )
                 beam_velocity = norm(np.einsum("sij,shbj->shbi", rot, vel))
         elif fields is not None:
