@@ -4,6 +4,7 @@ import importlib.metadata
 
 from . import io as io
 from . import scenes as scenes
+from . import zephycube as zephycube
 from .angles import direction_difference as direction_difference
 from .angles import horizontal_speed as horizontal_speed
 from .angles import seed_azimuth as seed_azimuth
@@ -31,6 +32,9 @@ from .probe import PointProbe as PointProbe
 from .probe import PulsedProbe as PulsedProbe
 from .response import PeriodicSpline as PeriodicSpline
 from .response import ResponseTable as ResponseTable
+from .roses import CorrectionRose as CorrectionRose
+from .roses import correction_rose as correction_rose
+from .roses import sector_rose as sector_rose
 from .scan import Scan as Scan
 from .scan import reconstruct as reconstruct
 from .scan import windcube_v1 as windcube_v1
