@@ -218,7 +218,7 @@ def test_gradients_match_finite_differences(table, random_records):
 def test_float32_in_float32_out_and_chunked_batches(table, random_records):
     sims, speed, direction = random_records
     los32 = np.asarray(sims.los, np.float32)
-    # 256 problems in batches of 96: three vmapped batches, the last one padded
+    # 64 records in batches of 24 records (96 problems): three batches, the last one padded
     inv = solve(table, los32, batch_size=96, noise=0.1)
     assert inv.speed.dtype == jnp.float32 and inv.speed_std.dtype == jnp.float32
     assert np.all(inv.converged)
