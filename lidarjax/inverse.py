@@ -340,7 +340,9 @@ def _run(spline, values, knots, valid, los, weights, noise, *, min_beams, max_st
         if is_concrete(noise) and np.any(~(np.asarray(noise) > 0)):
             raise ValueError(f"{fname}: `noise` must be positive (m/s), or None to estimate it.")
     if int(min_beams) < 2:
-        raise ValueError(f"{fname}: `min_beams` must be at least 2 (two unknowns), got {min_beams}.")
+        raise ValueError(
+            f"{fname}: `min_beams` must be at least 2 (two unknowns), got {min_beams}."
+        )
     if int(max_steps) < 1:
         raise ValueError(f"{fname}: `max_steps` must be positive, got {max_steps}.")
     if batch_size is not None and int(batch_size) < 1:
@@ -396,7 +398,9 @@ def invert(
     with ``converged=False`` and a reason in `flags`.
     """
     if not isinstance(table, ResponseTable):
-        raise ValueError(f"invert: `table` must be a lidarjax.ResponseTable, got {type(table).__name__}.")
+        raise ValueError(
+            f"invert: `table` must be a lidarjax.ResponseTable, got {type(table).__name__}."
+        )
     los_shape = jnp.shape(los)
     want = (table.n_heights, table.n_beams)
     if len(los_shape) < 2 or tuple(los_shape[-2:]) != want:

@@ -37,7 +37,7 @@ from scipy.interpolate import CubicSpline
 from ._precision import default_float, is_concrete
 from .angles import horizontal_speed, wind_direction
 from .forward import Simulation
-from .frames import cfd_to_north_rotation, rotate
+from .frames import cfd_to_north_rotation
 from .mount import Mount
 
 __all__ = ["PeriodicSpline", "ResponseTable"]
@@ -124,7 +124,7 @@ class PeriodicSpline(eqx.Module):
         return _cubic(self.coefficients[:, k, jnp.arange(n)], t)
 
     def derivative(self, direction: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
-        """Derivative with respect to direction, per degree: shape ``direction.shape + trailing``."""
+        """Derivative with respect to direction, per degree: ``direction.shape + trailing``."""
         direction = jnp.asarray(direction, self.start.dtype)
         return jax.jvp(self.__call__, (direction,), (jnp.ones_like(direction),))[1]
 
@@ -234,7 +234,9 @@ class ResponseTable(eqx.Module):
                 f"in degrees, got shape {d.shape}."
             )
         if not np.all(np.isfinite(d)):
-            raise ValueError(f"ResponseTable: `directions` must be finite degrees, got {d.tolist()}.")
+            raise ValueError(
+                f"ResponseTable: `directions` must be finite degrees, got {d.tolist()}."
+            )
         if r.ndim != 3 or r.shape[0] != d.size:
             raise ValueError(
                 f"ResponseTable: `response` must be shaped (s, h, b) = ({d.size}, heights, beams) "

@@ -54,7 +54,9 @@ class CorrectionRose(eqx.Module):
     target: str = eqx.field(static=True)
     sectors: bool = eqx.field(static=True)
 
-    def at(self, direction: Float[ArrayLike, "... h"]) -> tuple[Float[Array, "... h"], Float[Array, "... h"]]:
+    def at(
+        self, direction: Float[ArrayLike, "... h"]
+    ) -> tuple[Float[Array, "... h"], Float[Array, "... h"]]:
         """``(speed_ratio, direction_addend)`` at `direction` ``(..., h)`` (degrees, one per
         height): the sector's values for a sector rose, else linear interpolation."""
         direction = jnp.asarray(direction, self.directions.dtype)
@@ -111,7 +113,9 @@ def correction_rose(
     - `target`: ``"free"`` (free stream, default) or ``"point"`` (vertical above the lidar).
     """
     if reference not in _REFERENCES:
-        raise ValueError(f"correction_rose: `reference` must be one of {_REFERENCES}, got {reference!r}.")
+        raise ValueError(
+            f"correction_rose: `reference` must be one of {_REFERENCES}, got {reference!r}."
+        )
     if target not in _TARGETS:
         raise ValueError(f"correction_rose: `target` must be one of {_TARGETS}, got {target!r}.")
     n = 360.0 / float(resolution)

@@ -83,7 +83,8 @@ def beam_layout(table: ResponseTable) -> tuple[float, float, bool]:
     cones = np.degrees(np.arccos(np.clip(n[:4, 2], -1.0, 1.0)))
     az = np.degrees(np.arctan2(n[:4, 0], n[:4, 1]))
     steps = np.mod(az - az[0], 360.0)
-    if not (np.allclose(cones, cones[0], atol=1e-6) and np.allclose(steps, [0, 90, 180, 270], atol=1e-6)):
+    same_cone = np.allclose(cones, cones[0], atol=1e-6)
+    if not (same_cone and np.allclose(steps, [0, 90, 180, 270], atol=1e-6)):
         raise ValueError(
             f"zephycube: beams 0..3 must share one cone angle and sit at offset + (0, 90, 180, "
             f"270) degrees; got cones {cones.round(3).tolist()} and azimuths "

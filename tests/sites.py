@@ -56,7 +56,7 @@ def records(cfd_directions, speeds):
     return jax.tree_util.tree_map(lambda a: a[:n], out)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def table(sector: float = 30.0, first: float = 0.0, fields: bool = False) -> lj.ResponseTable:
     """A table of runs every `sector` degrees (CFD frame) from `first`."""
     cfd = first + np.arange(0.0, 360.0, sector)

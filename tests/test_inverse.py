@@ -10,6 +10,8 @@ import numpy as np
 import optimistix as optx
 import pytest
 import sites
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lidarjax as lj
 from lidarjax.inverse import InverseFlag
@@ -281,3 +283,34 @@ def test_validation(table):
     bare = lj.ResponseTable(table.directions, table.response)
     with pytest.raises(ValueError, match="reconstructed"):
         lj.invert_reconstructed(bare, np.ones(4), np.ones(4))
+
+
+def _distorted_table(seed):
+    """A Windcube-like table whose response is far from a first harmonic of direction."""
+    rng = np.random.default_rng(seed)
+    d = np.sort(rng.choice(np.arange(0.0, 360.0, 5.0), size=24, replace=False))
+    r = np.deg2rad(d)[:, None, None]
+    az = np.deg2rad(np.array([0.0, 90.0, 180.0, 270.0, 0.0]))
+    cone = np.deg2rad(np.array([28.0, 28.0, 28.0, 28.0, 0.0]))
+    homogeneous = -np.sin(cone) * np.cos(r - az)  # LOS of a unit wind from direction d
+    k = np.arange(2, 5)[:, None, None, None]
+    amp = 0.04 * rng.standard_normal((3, 1, 2, 5))
+    phase = rng.uniform(0, 2 * np.pi, (3, 1, 2, 5))
+    distortion = np.sum(amp * np.cos(k * r[None] + phase), axis=0)
+    return lj.ResponseTable(d, homogeneous * (1.0 + 0.2 * np.cos(r)) + distortion)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    speed=st.floats(0.3, 40.0),
+    direction=st.floats(0.0, 360.0, exclude_max=True),
+    seed=st.integers(0, 5),
+)
+def test_exact_model_records_are_recovered_on_nonuniform_distorted_tables(speed, direction, seed):
+    table = _distorted_table(seed)
+    los = speed * table.response_at(jnp.asarray([direction]))
+    inv = solve(table, los)
+    assert np.all(inv.converged)
+    np.testing.assert_allclose(inv.speed, speed, rtol=1e-8)
+    np.testing.assert_allclose(lj.wrap180(inv.direction - direction), 0.0, atol=1e-6)
+    assert np.all(inv.num_steps <= 8)
