@@ -23,6 +23,8 @@ optional vertical beam. Both are read from the table's `beam_vectors`.
   ``a_+- = 1`` where ``|c_sta| < threshold``: the text derives everything one component at a
   time, so the threshold is applied to the along-pair component, which is where the ratios
   misbehave.
+- `normalised_rose` (section 2): the CFD results at the beam points normalised by the centre
+  line (horizontal speed-up ratios and direction deviations) on a 360-degree rose.
 - `vector_correction` (section 3.2.2): from raw beams, ``P_corr = P_raw * SU(alpha)`` with the
   per-beam speed-up ``SU = (V(M_vert) . n_b) / (V(M_b) . n_b)`` from the table (numerator and
   denominator are interpolated separately, then divided), then the DBS formulas with the
@@ -41,11 +43,19 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .angles import horizontal_speed, wind_direction
+from .angles import direction_difference, horizontal_speed, wind_direction
 from .corrections import DEFAULT_RATIO_TOL
 from .response import ResponseTable
 
-__all__ = ["Wind", "beam_layout", "homogeneous", "scalar_correction", "vector_correction"]
+__all__ = [
+    "Wind",
+    "NormalisedRose",
+    "beam_layout",
+    "homogeneous",
+    "normalised_rose",
+    "scalar_correction",
+    "vector_correction",
+]
 
 
 class Wind(eqx.Module):
@@ -286,3 +296,43 @@ def _cast(table, dtype):
     return jax.tree_util.tree_map(
         lambda a: a.astype(dtype) if jnp.issubdtype(a.dtype, jnp.floating) else a, table
     )
+
+
+class NormalisedRose(eqx.Module):
+    """ZephyCube's "rose of normalised results" (``n`` directions, ``h`` heights, ``b`` beams).
+
+    - `directions`: ``(n,)`` free-stream directions, degrees, evenly spaced from 0.
+    - `speed_up`: ``(n, h, b)`` horizontal speed at each beam point over that on the centre
+      line at the same height.
+    - `deviation`: ``(n, h, b)`` direction at each beam point minus that on the centre line,
+      degrees in ``(-180, 180]``.
+    """
+
+    directions: Float[Array, " n"]
+    speed_up: Float[Array, "n h b"]
+    deviation: Float[Array, "n h b"]
+
+
+def normalised_rose(table: ResponseTable, *, resolution: float = 1.0) -> NormalisedRose:
+    """ZephyCube's normalised CFD results, interpolated every `resolution` degrees (1 by
+    default; it must divide 360), from a table with `beam_velocity` and `point`."""
+    if table.beam_velocity is None or table.point is None:
+        raise ValueError(
+            "normalised_rose: the table needs `beam_velocity` and `point`; build it with "
+            "ResponseTable.from_simulations(sims, mount=mount, fields=fields)."
+        )
+    n = 360.0 / float(resolution)
+    if not (resolution > 0 and abs(n - round(n)) < 1e-9):
+        raise ValueError(f"normalised_rose: `resolution` must divide 360, got {resolution!r}.")
+    dirs = jnp.asarray(np.arange(int(round(n))) * float(resolution), table.dtype)
+    speed_up, deviation = _normalised(table, dirs)
+    return NormalisedRose(dirs, speed_up, deviation)
+
+
+@eqx.filter_jit
+def _normalised(table, dirs):
+    beams = table.beam_velocity_at(dirs)  # (n, h, b, 3)
+    centre = jnp.broadcast_to(table.point_at(dirs)[..., None, :], beams.shape)
+    speed_up = horizontal_speed(beams) / horizontal_speed(centre)
+    return speed_up, direction_difference(beams, centre)
+

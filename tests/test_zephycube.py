@@ -90,6 +90,20 @@ def test_filter_and_missing_beams(table, records):
         zc.vector_correction(table, los[..., :4])
 
 
+def test_normalised_rose_matches_the_tabulated_runs(table):
+    rose = zc.normalised_rose(table)
+    assert rose.speed_up.shape == (360, len(sites.HEIGHTS), 5)
+    k = np.round(np.asarray(table.directions)).astype(int) % 360  # runs at whole degrees
+    beams, centre = np.asarray(table.beam_velocity), np.asarray(table.point)
+    ratio = np.hypot(beams[..., 0], beams[..., 1])
+    ratio = ratio / np.hypot(centre[..., 0], centre[..., 1])[..., None]
+    np.testing.assert_allclose(rose.speed_up[k], ratio, rtol=1e-10)
+    dev = lj.direction_difference(beams, np.broadcast_to(centre[:, :, None], beams.shape))
+    np.testing.assert_allclose(rose.deviation[k], dev, atol=1e-8)
+    with pytest.raises(ValueError, match="beam_velocity"):
+        zc.normalised_rose(sites.table(30.0))
+
+
 def test_free_rose_is_the_seed_correction_factors():
     table = sites.table(30.0)
     sims = sites.records(np.arange(0.0, 360.0, 30.0), 10.0)
