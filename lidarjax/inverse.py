@@ -28,7 +28,10 @@ the LOS noise level ``sigma`` (m/s for a beam of unit weight) given as `noise` o
 from the weighted residuals, ``sigma**2 = sum w r**2 / (n_beams - 2)``.
 
 Gradients. ``speed`` and ``direction`` are differentiable with respect to the LOS, the
-weights and the table (implicit differentiation of the optimum, `optimistix.ImplicitAdjoint`).
+weights and the table's spline coefficients (``table.response_spline.coefficients``; the fit
+of those coefficients runs on the host and is not traced) by implicit differentiation of the
+optimum (`optimistix.ImplicitAdjoint`): propagate LOS noise with ``jax.jacrev`` or run
+sensitivity studies without differentiating through the iterations.
 
 Directions are meteorological (from, degrees clockwise from north) in ``[0, 360)``.
 """
