@@ -85,7 +85,9 @@ class Inversion(eqx.Module):
     - `converged`: bool; False means NaN results, with the reason in `flags`.
     - `residual_rms`: weighted RMS of the LOS residuals ``los - U R(d)``, m/s.
     - `speed_std`, `direction_std`: one-sigma uncertainties (m/s, degrees) from the
-      Jacobian at the solution and the noise level `noise`.
+      Jacobian at the solution and the noise level `noise`. With a given noise level,
+      ``1.96 * std`` covers 95 %; with the noise estimated from ``dof = n_beams - 2`` spare
+      beams, use Student's t quantile for `dof` (3.18 for a Windcube V2's 3 spare beams).
     - `noise`: LOS noise level used (given, or estimated from the residuals), m/s.
     - `n_beams`: number of beams used (finite LOS, positive weight, present in the table).
     - `num_steps`: solver steps taken (bounded by `max_steps`).
@@ -105,6 +107,11 @@ class Inversion(eqx.Module):
     num_steps: Int[Array, "... h"]
     result: optx.RESULTS
     flags: Int[Array, "... h"]
+
+    @property
+    def dof(self) -> Int[Array, "... h"]:
+        """Spare beams behind the noise estimate: ``n_beams - 2``."""
+        return self.n_beams - 2
 
     @property
     def velocity(self) -> Float[Array, "... h 2"]:
