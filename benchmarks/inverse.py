@@ -72,8 +72,8 @@ class WakeHemisphere(AbstractField):
     solution: a smooth synthetic site whose response has sharp features in direction.
     """
 
-    origin: Float[Array, "3"]
-    origin_lo: Float[Array, "3"]
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
     body: Hemisphere
     deficit: Float[Array, ""]
 

@@ -104,7 +104,7 @@ class PeriodicSpline(eqx.Module):
     coefficients: Float[Array, "4 s ..."]
     uniform: bool = eqx.field(static=True)
 
-    def __call__(self, direction: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
+    def __call__(self, direction: Float[ArrayLike, ...]) -> Float[Array, ...]:
         """Values at `direction` (degrees): shape ``direction.shape + trailing``."""
         direction = jnp.asarray(direction, self.start.dtype)
         k, t = locate(self.start, self.offsets, self.widths, self.uniform, direction)
@@ -123,7 +123,7 @@ class PeriodicSpline(eqx.Module):
         k, t = locate(self.start, self.offsets, self.widths, self.uniform, direction)
         return _cubic(self.coefficients[:, k, jnp.arange(n)], t)
 
-    def derivative(self, direction: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
+    def derivative(self, direction: Float[ArrayLike, ...]) -> Float[Array, ...]:
         """Derivative with respect to direction, per degree: ``direction.shape + trailing``."""
         direction = jnp.asarray(direction, self.start.dtype)
         return jax.jvp(self.__call__, (direction,), (jnp.ones_like(direction),))[1]
@@ -333,25 +333,25 @@ class ResponseTable(eqx.Module):
             )
         return spline
 
-    def response_at(self, direction: Float[ArrayLike, "..."]) -> Float[Array, "... h b"]:
+    def response_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h b"]:
         """LOS per unit free-stream speed at meteorological `direction` (degrees, one per
         record, the same for all heights): ``(..., h, b)``; NaN for missing beams."""
         out = self.response_spline(direction)
         return jnp.where(self.valid, out, jnp.nan)
 
-    def reconstructed_at(self, direction: Float[ArrayLike, "..."]) -> Float[Array, "... h 3"]:
+    def reconstructed_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h 3"]:
         """Instrument's reconstructed vector per unit free-stream speed, north frame."""
         return self._need(self.reconstructed_spline, "reconstructed")(direction)
 
-    def point_at(self, direction: Float[ArrayLike, "..."]) -> Float[Array, "... h 3"]:
+    def point_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h 3"]:
         """Velocity on the vertical above the lidar per unit free-stream speed, north frame."""
         return self._need(self.point_spline, "point")(direction)
 
-    def beam_velocity_at(self, direction: Float[ArrayLike, "..."]) -> Float[Array, "... h b 3"]:
+    def beam_velocity_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h b 3"]:
         """Velocity at the beam points per unit free-stream speed, north frame."""
         return self._need(self.beam_velocity_spline, "beam_velocity")(direction)
 
-    def centre_projection_at(self, direction: Float[ArrayLike, "..."]) -> Float[Array, "... h b"]:
+    def centre_projection_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h b"]:
         """Centre-line velocity projected on each beam, per unit free-stream speed: the
         numerator of ZephyCube's per-beam speed-up (`response_at` is the denominator)."""
         if self.beam_vectors is None:
