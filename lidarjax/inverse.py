@@ -1,0 +1,495 @@
+"""Free-stream wind from what a lidar measured, by inverting a `ResponseTable`.
+
+For every record ``r`` and height ``h`` the LOS of beam ``b`` is modelled as
+``los_b = U * R_hb(d)``: the free-stream speed ``U`` (m/s) times the tabulated response at the
+free-stream direction ``d`` (Reynolds independence). `invert` solves
+
+``min_{U, d}  sum_b w_b (los_b - U R_hb(d))**2``
+
+per record and height with an optimistix least-squares solver (Gauss--Newton by default),
+vmapped over the whole batch.
+
+Parametrisation. The unknown is the free-stream horizontal velocity ``y = (u, v)`` in the
+north frame (m/s), ``U = |y|`` and ``d = wind_direction(y)``. The Jacobian in these
+coordinates is a rotation of ``[R(d), dR/dd]`` and so stays well conditioned down to calm
+wind, and there is no 0/360 branch: a start at 359 degrees reaches a truth at 1 degree.
+
+Start. For each tabulated direction ``d_k`` the closed-form speed
+``U_k = max(0, sum w los R_k / sum w R_k**2)`` and its cost are computed; the best ``(U_k, d_k)``
+starts the solver. It needs no scan geometry and cannot start in a wrong branch.
+
+Robustness. NaN LOS and beams missing from the table get zero weight; a record and height
+with fewer than `min_beams` usable beams, or whose beams cannot tell the direction, gets NaN
+with ``converged=False``; the solver runs with ``throw=False`` and a bounded step count, so no
+record can stop or disturb the others (every problem is solved independently).
+
+Uncertainty. From the Jacobian at the solution, ``cov(U, d) = sigma**2 (J^T W J)^-1`` with
+the LOS noise level ``sigma`` (m/s for a beam of unit weight) given as `noise` or estimated
+from the weighted residuals, ``sigma**2 = sum w r**2 / (n_beams - 2)``.
+
+Gradients. ``speed`` and ``direction`` are differentiable with respect to the LOS, the
+weights and the table's spline coefficients (``table.response_spline.coefficients``; the fit
+of those coefficients runs on the host and is not traced) by implicit differentiation of the
+optimum (`optimistix.ImplicitAdjoint`): propagate LOS noise with ``jax.jacrev`` or run
+sensitivity studies without differentiating through the iterations.
+
+Directions are meteorological (from, degrees clockwise from north) in ``[0, 360)``.
+"""
+
+from __future__ import annotations
+
+import enum
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from ._precision import default_float, is_concrete
+from .response import PeriodicSpline, ResponseTable, locate
+
+__all__ = ["Inversion", "InverseFlag", "invert", "invert_reconstructed", "default_solver"]
+
+#: Default number of problems (record-heights) solved together in one vmapped batch (rounded
+#: down to whole records). Small batches waste little on their slowest member; measured best
+#: on CPU between 256 and 1024 (benchmarks/inverse.py).
+DEFAULT_BATCH_SIZE = 512
+
+
+class InverseFlag(enum.IntFlag):
+    """Why an inversion result is NaN or doubtful (bitmask in `Inversion.flags`). ``OK`` is 0."""
+
+    OK = 0
+    #: Fewer than `min_beams` finite, positively weighted beams: result NaN, not converged.
+    TOO_FEW_BEAMS = 1
+    #: The solver did not converge within `max_steps` (or met non-finite values): NaN.
+    NOT_CONVERGED = 2
+    #: The usable beams cannot tell the direction (``[R, dR/dd]`` is rank deficient): NaN.
+    ILL_CONDITIONED = 4
+    #: The best fit is zero speed: `direction` is NaN and `direction_std` inf.
+    CALM = 8
+    #: No noise level was given and there are no spare beams to estimate it (two beams for
+    #: two unknowns): the standard deviations are NaN.
+    NO_NOISE_ESTIMATE = 16
+
+
+class Inversion(eqx.Module):
+    """Results of `invert` / `invert_reconstructed`, each shaped ``(..., h)``.
+
+    - `speed`: free-stream horizontal speed, m/s (NaN where not converged).
+    - `direction`: free-stream meteorological direction, degrees in ``[0, 360)`` (NaN where
+      not converged or calm).
+    - `converged`: bool; False means NaN results, with the reason in `flags`.
+    - `residual_rms`: weighted RMS of the LOS residuals ``los - U R(d)``, m/s.
+    - `speed_std`, `direction_std`: one-sigma uncertainties (m/s, degrees) from the
+      Jacobian at the solution and the noise level `noise`. With a given noise level,
+      ``1.96 * std`` covers 95 %; with the noise estimated from ``dof = n_beams - 2`` spare
+      beams, use Student's t quantile for `dof` (3.18 for a Windcube V2's 3 spare beams).
+    - `noise`: LOS noise level used (given, or estimated from the residuals), m/s.
+    - `n_beams`: number of beams used (finite LOS, positive weight, present in the table).
+    - `num_steps`: solver steps taken (bounded by `max_steps`).
+    - `result`: the solver's `optimistix.RESULTS` (compare with
+      ``optimistix.RESULTS.successful``).
+    - `flags`: int32 bitmask of `InverseFlag`.
+    """
+
+    speed: Float[Array, "... h"]
+    direction: Float[Array, "... h"]
+    converged: Bool[Array, "... h"]
+    residual_rms: Float[Array, "... h"]
+    speed_std: Float[Array, "... h"]
+    direction_std: Float[Array, "... h"]
+    noise: Float[Array, "... h"]
+    n_beams: Int[Array, "... h"]
+    num_steps: Int[Array, "... h"]
+    result: optx.RESULTS
+    flags: Int[Array, "... h"]
+
+    @property
+    def dof(self) -> Int[Array, "... h"]:
+        """Spare beams behind the noise estimate: ``n_beams - 2``."""
+        return self.n_beams - 2
+
+    @property
+    def velocity(self) -> Float[Array, "... h 2"]:
+        """Free-stream horizontal velocity ``(u, v)`` in the north frame, m/s."""
+        d = jnp.deg2rad(self.direction)
+        return jnp.stack([-self.speed * jnp.sin(d), -self.speed * jnp.cos(d)], axis=-1)
+
+
+# ------------------------------------------------------------------------------------------
+# The per-problem model
+
+
+def _polar(y):
+    """Speed and meteorological direction (degrees) of ``y = (u, v)``, gradient-safe at 0."""
+    u, v = y[0], y[1]
+    h2 = u * u + v * v
+    calm = h2 <= jnp.finfo(h2.dtype).tiny
+    speed = jnp.where(calm, 0.0, jnp.sqrt(jnp.where(calm, 1.0, h2)))
+    d = jnp.rad2deg(jnp.arctan2(jnp.where(calm, 0.0, -u), jnp.where(calm, 1.0, -v)))
+    return speed, d, calm
+
+
+def _row(geom, coefficients, hidx, direction):
+    """Spline value ``(b,)`` of height `hidx` at `direction` (degrees, any real)."""
+    k, t = locate(*geom, direction)
+    c = coefficients[:, k, hidx]  # (4, b)
+    return c[0] + t * (c[1] + t * (c[2] + t * c[3]))
+
+
+def _residuals(y, args):
+    los, sw, hidx, geom, coefficients = args
+    speed, d, _ = _polar(y)
+    return sw * (los - speed * _row(geom, coefficients, hidx, d))
+
+
+def _solve_one(los, w, hidx, noise, k, u0, knots, geom, coefficients, cfg):
+    """One record-height: `los`, `w` ``(b,)`` (cleaned: unusable beams have ``w = 0`` and
+    ``los = 0``); `noise` scalar (NaN: estimate); start ``(k, u0)``: tabulated direction index
+    and its closed-form speed."""
+    solver, max_steps, min_beams = cfg
+    dtype = los.dtype
+    usable = w > 0
+    n_beams = jnp.sum(usable.astype(jnp.int32))
+    sw = jnp.sqrt(jnp.where(usable, w, 1.0)) * usable
+    d0 = jnp.deg2rad(knots[k])
+    y0 = jax.lax.stop_gradient(jnp.stack([-u0 * jnp.sin(d0), -u0 * jnp.cos(d0)]))
+
+    # A problem the solver cannot start (no tabulated direction fits a positive speed, so
+    # the answer is calm; or too few beams) is swapped for a trivial one (the table's own
+    # response at the start direction, solved at the first step) and its outputs overridden.
+    calm_start = u0 <= 0
+    trivial = calm_start | (n_beams < min_beams)
+    unit = jnp.stack([-jnp.sin(d0), -jnp.cos(d0)])
+    # Solve in units of the record's weighted RMS LOS, so tolerances are relative and the
+    # solver behaves the same at 0.01 and 100 m/s.
+    scale = jnp.sqrt(jnp.sum(w * los * los) / jnp.where(jnp.sum(w) > 0, jnp.sum(w), 1.0))
+    scale = jax.lax.stop_gradient(jnp.where(trivial | ~(scale > 0), 1.0, scale))
+    args = (
+        jnp.where(trivial, _row(geom, coefficients, hidx, knots[k]), los / scale),
+        jnp.where(trivial, jnp.ones_like(sw), sw),
+        hidx,
+        geom,
+        coefficients,
+    )
+    y0 = jnp.where(trivial, unit, y0 / scale)
+    sol = optx.least_squares(_residuals, solver, y0, args, max_steps=max_steps, throw=False)
+    y = jnp.where(trivial, 0.0, sol.value * scale)
+    speed, d, calm = _polar(y)
+    d = jnp.where(calm, knots[k], d)  # a direction for the calm Jacobian (speed variance)
+
+    # Jacobian in (U, d [degrees]) at the solution.
+    r_d, dr_d = jax.jvp(lambda x: _row(geom, coefficients, hidx, x), (d,), (jnp.ones_like(d),))
+    resid = los - speed * r_d
+    wrss = jnp.sum(w * resid * resid)
+    wsum = jnp.sum(w)
+    residual_rms = jnp.sqrt(wrss / jnp.where(wsum > 0, wsum, 1.0))
+    residual_rms = jnp.where(wsum > 0, residual_rms, jnp.nan)
+    dof = n_beams - 2
+    sigma2_est = jnp.where(dof > 0, wrss / jnp.maximum(dof, 1), jnp.nan)
+    sigma2 = jnp.where(jnp.isnan(noise), sigma2_est, noise * noise)
+    m_uu = jnp.sum(w * r_d * r_d)
+    m_ud = jnp.sum(w * r_d * dr_d) * speed
+    m_dd = jnp.sum(w * dr_d * dr_d) * speed * speed
+    schur_u = m_uu - jnp.where(m_dd > 0, m_ud * m_ud / jnp.where(m_dd > 0, m_dd, 1.0), 0.0)
+    schur_d = m_dd - jnp.where(m_uu > 0, m_ud * m_ud / jnp.where(m_uu > 0, m_uu, 1.0), 0.0)
+    inf = jnp.asarray(jnp.inf, dtype)
+    var_u = jnp.where(schur_u > 0, sigma2 / jnp.where(schur_u > 0, schur_u, 1.0), inf)
+    var_d = jnp.where(schur_d > 0, sigma2 / jnp.where(schur_d > 0, schur_d, 1.0), inf)
+
+    # Identifiability of the direction, independent of the speed: [R, dR/dd (per radian)].
+    g = dr_d * (180.0 / np.pi)
+    g_uu, g_ud, g_dd = m_uu, jnp.sum(w * r_d * g), jnp.sum(w * g * g)
+    tr = g_uu + g_dd
+    det = g_uu * g_dd - g_ud * g_ud
+    disc = jnp.sqrt(jnp.maximum(tr * tr - 4.0 * det, 0.0))
+    lam_min = 0.5 * (tr - disc)
+    lam_max = 0.5 * (tr + disc)
+    rcond = jnp.sqrt(jnp.finfo(dtype).eps)
+    well_posed = lam_min > rcond * lam_max
+
+    ok_solver = sol.result == optx.RESULTS.successful
+    finite = jnp.all(jnp.isfinite(y))
+    enough = n_beams >= min_beams
+    converged = ok_solver & finite & enough & well_posed
+    flags = (
+        jnp.where(enough, 0, int(InverseFlag.TOO_FEW_BEAMS))
+        | jnp.where(ok_solver & finite, 0, int(InverseFlag.NOT_CONVERGED))
+        | jnp.where(well_posed | ~enough, 0, int(InverseFlag.ILL_CONDITIONED))
+        | jnp.where(converged & calm, int(InverseFlag.CALM), 0)
+        | jnp.where(converged & jnp.isnan(sigma2), int(InverseFlag.NO_NOISE_ESTIMATE), 0)
+    )
+    nan = jnp.asarray(jnp.nan, dtype)
+    direction = jnp.mod(d, 360.0)
+    direction = jnp.where(direction >= 360.0, direction - 360.0, direction)
+    out = dict(
+        speed=jnp.where(converged, speed, nan),
+        direction=jnp.where(converged & ~calm, direction, nan),
+        converged=converged,
+        residual_rms=residual_rms,
+        speed_std=jnp.where(converged, jnp.sqrt(var_u), nan),
+        direction_std=jnp.where(converged, jnp.where(calm, inf, jnp.sqrt(var_d)), nan),
+        noise=jnp.sqrt(sigma2),
+        n_beams=n_beams,
+        num_steps=sol.stats["num_steps"].astype(jnp.int32),
+        result=sol.result,
+        flags=flags.astype(jnp.int32),
+    )
+    return out
+
+
+def default_solver(dtype=None) -> optx.AbstractLeastSquaresSolver:
+    """The solver `invert` uses by default: `optimistix.GaussNewton` on the normal equations
+    (`lineax.Normal(lineax.Cholesky())`: two unknowns, a well-conditioned Jacobian) with
+    relative and absolute tolerances ``max(1e-6, 100 eps)`` of `dtype` (1e-6 in float64,
+    1.2e-5 in float32), in units of the record's RMS LOS (the problem is solved in those
+    units). Gauss--Newton converges quadratically here, so the solution is far more accurate
+    than the tolerance on the last step."""
+    eps = float(jnp.finfo(dtype if dtype is not None else default_float()).eps)
+    tol = max(1e-6, 100.0 * eps)
+    return optx.GaussNewton(rtol=tol, atol=tol, linear_solver=lx.Normal(lx.Cholesky()))
+
+
+def _solve_batch(los, w, noise, values, knots, geom, coefficients, cfg):
+    """Records ``(r, h, b)``: start from the table densely, then solve every record-height."""
+    r, h, b = los.shape
+    usable = (w > 0) & jnp.isfinite(los)
+    w = jnp.where(usable, w, 0.0)
+    los = jnp.where(usable, los, 0.0)
+    # Start: best tabulated direction with its closed-form nonnegative speed.
+    a = jnp.einsum("rhb,shb->rhs", w * los, values)
+    c = jnp.einsum("rhb,shb->rhs", w, values * values)
+    uk = jnp.where((a > 0) & (c > 0), a / jnp.where(c > 0, c, 1.0), 0.0)
+    k = jnp.argmax(a * uk, axis=-1)
+    u0 = jnp.take_along_axis(uk, k[..., None], axis=-1)[..., 0]
+    hidx = jnp.broadcast_to(jnp.arange(h, dtype=jnp.int32), (r, h))
+    flat = lambda x: x.reshape((r * h,) + x.shape[2:])  # noqa: E731
+
+    def one(los_i, w_i, h_i, noise_i, k_i, u0_i):
+        return _solve_one(los_i, w_i, h_i, noise_i, k_i, u0_i, knots, geom, coefficients, cfg)
+
+    out = jax.vmap(one)(*(flat(x) for x in (los, w, hidx, noise, k, u0)))
+    return jax.tree_util.tree_map(lambda x: x.reshape((r, h) + x.shape[1:]), out)
+
+
+@eqx.filter_jit
+def _invert_core(spline, values, knots, valid, los, weights, noise, cfg, batch_size):
+    *batch, h, b = los.shape
+    n = int(np.prod(batch, dtype=np.int64))
+    los_r = los.reshape(n, h, b)
+    w_r = (weights * valid).reshape(n, h, b)
+    noise_r = noise.reshape(n, h)
+    values = jnp.where(valid, values, 0.0)
+    geom = (spline.start, spline.offsets, spline.widths, spline.uniform)
+
+    def run(x):
+        return _solve_batch(*x, values, knots, geom, spline.coefficients, cfg)
+
+    per_batch = n if batch_size is None else max(1, batch_size // h)
+    if n <= per_batch:
+        out = run((los_r, w_r, noise_r))
+    else:
+        pad = (-n) % per_batch
+        xs = (
+            jnp.concatenate([los_r, jnp.zeros((pad, h, b), los.dtype)]),
+            jnp.concatenate([w_r, jnp.zeros((pad, h, b), w_r.dtype)]),
+            jnp.concatenate([noise_r, jnp.full((pad, h), jnp.nan, noise_r.dtype)]),
+        )
+        xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
+        out = jax.lax.map(run, xs)
+        out = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:])[:n], out)
+    out = jax.tree_util.tree_map(lambda x: x.reshape(tuple(batch) + x.shape[1:]), out)
+    return Inversion(**out)
+
+
+def _cast_floats(tree, dtype):
+    return jax.tree_util.tree_map(
+        lambda a: a.astype(dtype)
+        if isinstance(a, jax.Array) and jnp.issubdtype(a.dtype, jnp.floating)
+        else a,
+        tree,
+    )
+
+
+def _broadcast_input(name, value, shape, dtype, what):
+    arr = jnp.asarray(value)
+    try:
+        return jnp.broadcast_to(arr, shape).astype(dtype)
+    except ValueError:
+        raise ValueError(
+            f"invert: `{name}` of shape {arr.shape} does not broadcast to {what} {shape}."
+        ) from None
+
+
+def _run(spline, values, knots, valid, los, weights, noise, *, min_beams, max_steps, solver,
+         batch_size, fname, unit):
+    los = jnp.asarray(los)
+    dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else values.dtype
+    los = los.astype(dtype)
+    shape = los.shape
+    if weights is None:
+        weights = jnp.ones(shape, dtype)
+    else:
+        weights = _broadcast_input("weights", weights, shape, dtype, f"{unit} shape")
+        if is_concrete(weights):
+            wn = np.asarray(weights)
+            if np.any(wn < 0) or np.any(np.isinf(wn)):
+                raise ValueError(
+                    f"{fname}: `weights` must be finite and nonnegative (relative inverse "
+                    f"variances; NaN or 0 drops a beam)."
+                )
+        weights = jnp.where(jnp.isnan(weights), 0.0, weights)
+    if noise is None:
+        noise = jnp.full(shape[:-1], jnp.nan, dtype)
+    else:
+        noise = _broadcast_input("noise", noise, shape[:-1], dtype, "(..., h)")
+        if is_concrete(noise) and np.any(~(np.asarray(noise) > 0)):
+            raise ValueError(f"{fname}: `noise` must be positive (m/s), or None to estimate it.")
+    if int(min_beams) < 2:
+        raise ValueError(
+            f"{fname}: `min_beams` must be at least 2 (two unknowns), got {min_beams}."
+        )
+    if int(max_steps) < 1:
+        raise ValueError(f"{fname}: `max_steps` must be positive, got {max_steps}.")
+    if batch_size is not None and int(batch_size) < 1:
+        raise ValueError(f"{fname}: `batch_size` must be positive or None, got {batch_size}.")
+    if solver is None:
+        solver = default_solver(dtype)
+    spline, values, knots = _cast_floats((spline, values, knots), dtype)
+    cfg = (solver, int(max_steps), int(min_beams))
+    return _invert_core(
+        spline, values, knots, valid, los, weights, noise, cfg,
+        None if batch_size is None else int(batch_size),
+    )
+
+
+def invert(
+    table: ResponseTable,
+    los: Float[ArrayLike, "... h b"],
+    *,
+    weights: Float[ArrayLike, "... h b"] | None = None,
+    noise: Float[ArrayLike, "... h"] | None = None,
+    min_beams: int = 3,
+    max_steps: int = 32,
+    solver: optx.AbstractLeastSquaresSolver | None = None,
+    batch_size: int | None = DEFAULT_BATCH_SIZE,
+) -> Inversion:
+    """Free-stream speed and direction from raw LOS records, per record and height.
+
+    **Arguments:**
+
+    - `table`: the site's `ResponseTable` (``h`` heights, ``b`` beams).
+    - `los`: ``(..., h, b)`` measured LOS velocities, m/s, positive away from the lidar,
+      beams ordered as in the table. NaN marks a missing beam.
+    - `weights`: optional, broadcastable to ``(..., h, b)``: relative inverse variances of
+      the beams (default 1); 0 or NaN drops a beam.
+    - `noise`: optional, broadcastable to ``(..., h)``: the LOS noise standard deviation of a
+      beam of unit weight, m/s; if None it is estimated from the residuals of each problem
+      (needs more beams than the two unknowns).
+    - `min_beams`: fewest usable beams for an answer (default 3, so one beam is spare).
+    - `max_steps`: bound on solver steps per problem.
+    - `solver`: an optimistix least-squares solver (default `default_solver`: Gauss--Newton,
+      which takes 3 to 6 steps from the tabulated start; `optimistix.LevenbergMarquardt` is
+      also fine but takes two to four times more steps). Its tolerances are relative: the
+      problem is solved in units of the record's RMS LOS.
+    - `batch_size`: problems (record-heights) per vmapped batch, rounded down to whole
+      records; batches run one after another, which bounds memory for large campaigns, and
+      each runs only as many steps as its slowest member. None solves everything at once.
+
+    **Returns:** an `Inversion` whose arrays are shaped ``(..., h)``, in the dtype of `los`
+    (float32 input gives float32 results).
+
+    Raises `ValueError` before compiling for shapes that do not match the table, negative
+    weights or non-positive noise. Never raises for bad data: those records come back NaN
+    with ``converged=False`` and a reason in `flags`.
+    """
+    if not isinstance(table, ResponseTable):
+        raise ValueError(
+            f"invert: `table` must be a lidarjax.ResponseTable, got {type(table).__name__}."
+        )
+    los_shape = jnp.shape(los)
+    want = (table.n_heights, table.n_beams)
+    if len(los_shape) < 2 or tuple(los_shape[-2:]) != want:
+        raise ValueError(
+            f"invert: `los` must be shaped (..., h, b) with (h, b) = {want} as in the table; got "
+            f"{tuple(los_shape)}."
+        )
+    return _run(
+        table.response_spline, table.response, table.directions, table.valid, los, weights,
+        noise, min_beams=min_beams, max_steps=max_steps, solver=solver, batch_size=batch_size,
+        fname="invert", unit="los",
+    )
+
+
+def invert_reconstructed(
+    table: ResponseTable,
+    speed: Float[ArrayLike, "... h"],
+    direction: Float[ArrayLike, "... h"],
+    *,
+    noise: Float[ArrayLike, "... h"] | None = None,
+    max_steps: int = 32,
+    solver: optx.AbstractLeastSquaresSolver | None = None,
+    batch_size: int | None = DEFAULT_BATCH_SIZE,
+) -> Inversion:
+    """Free-stream speed and direction from the instrument's reconstructed records
+    (``.sta``-style horizontal speed and direction per height).
+
+    The reported horizontal vector ``(u, v)`` is modelled as ``U * Rrec_h(d)`` with the
+    table's `reconstructed` response, and solved exactly like `invert` with the two vector
+    components as two "beams". Two equations for two unknowns: the standard deviations need
+    `noise` (the standard deviation of each reported component, m/s), else they are NaN.
+
+    **Arguments:**
+
+    - `table`: a `ResponseTable` with `reconstructed` (e.g. from `from_simulations`).
+    - `speed`: ``(..., h)`` reported horizontal speed, m/s.
+    - `direction`: ``(..., h)`` reported meteorological direction, degrees (north frame);
+      NaN is allowed where the speed is 0 (calm).
+    - `noise`, `max_steps`, `solver`, `batch_size`: as for `invert`.
+
+    **Returns:** an `Inversion` shaped ``(..., h)``.
+    """
+    if not isinstance(table, ResponseTable):
+        raise ValueError(
+            f"invert_reconstructed: `table` must be a lidarjax.ResponseTable, got "
+            f"{type(table).__name__}."
+        )
+    if table.reconstructed is None:
+        raise ValueError(
+            "invert_reconstructed: the table has no `reconstructed` response; build it with "
+            "ResponseTable.from_simulations or pass `reconstructed=`."
+        )
+    speed = jnp.asarray(speed)
+    direction = jnp.asarray(direction)
+    try:
+        shape = jnp.broadcast_shapes(speed.shape, direction.shape)
+    except ValueError:
+        raise ValueError(
+            f"invert_reconstructed: `speed` {speed.shape} and `direction` {direction.shape} do "
+            f"not broadcast together."
+        ) from None
+    if len(shape) < 1 or shape[-1] != table.n_heights:
+        raise ValueError(
+            f"invert_reconstructed: `speed` and `direction` must be shaped (..., h) with "
+            f"h = {table.n_heights} as in the table; got {shape}."
+        )
+    dtype = speed.dtype if jnp.issubdtype(speed.dtype, jnp.floating) else table.dtype
+    speed = jnp.broadcast_to(speed, shape).astype(dtype)
+    direction = jnp.broadcast_to(direction, shape).astype(dtype)
+    calm = speed == 0
+    rad = jnp.deg2rad(jnp.where(calm, 0.0, direction))
+    uv = jnp.stack([-speed * jnp.sin(rad), -speed * jnp.cos(rad)], axis=-1)
+    spline = table.reconstructed_spline
+    sub = PeriodicSpline(
+        spline.start, spline.offsets, spline.widths, spline.coefficients[..., :2], spline.uniform
+    )
+    valid = jnp.ones((table.n_heights, 2), bool)
+    return _run(
+        sub, table.reconstructed[..., :2], table.directions, valid, uv, None, noise,
+        min_beams=2, max_steps=max_steps, solver=solver, batch_size=batch_size,
+        fname="invert_reconstructed", unit="(..., h, 2)",
+    )

@@ -1,0 +1,475 @@
+"""Response tables: what a lidar measures per unit free-stream speed, against inflow direction.
+
+A site is described by CFD runs over inflow directions. With Reynolds independence every
+velocity in a run scales with the free-stream speed, so each run gives, per height ``h`` and
+beam ``b``, the LOS per unit free-stream speed (the *response*). A `ResponseTable` holds these
+numbers for ``s`` tabulated directions and evaluates them at any direction by a periodic cubic
+spline (period 360 degrees, continuous second derivative, error ``O(spacing**4)``).
+
+Besides the LOS response a table can hold, all per unit free-stream speed and in the north
+frame (``+y`` north, ``+x`` east, ``+z`` up):
+
+- `reconstructed`: ``(s, h, 3)`` the instrument's reconstructed vector (what a ``.sta`` file
+  reports), for `lidarjax.invert_reconstructed` and the correction roses;
+- `point`: ``(s, h, 3)`` the velocity on the vertical above the lidar (the centre line);
+- `beam_velocity`: ``(s, h, b, 3)`` the full velocity at the beam points (ZephyCube's scalar
+  correction needs the along-pair and vertical components there, not only the LOS);
+- `beam_vectors`: ``(b, 3)`` the beam unit vectors (direction-independent).
+
+Directions are meteorological: where the wind comes **from**, degrees clockwise from north.
+
+The spline coefficients are computed once on the host (``scipy.interpolate.CubicSpline`` with
+``bc_type='periodic'``, any spacing) and stored as arrays; evaluation is pure JAX (locate the
+interval, evaluate a cubic), differentiable in the direction and in the tabulated values.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
+from scipy.interpolate import CubicSpline
+
+from ._precision import default_float, is_concrete
+from .angles import horizontal_speed, wind_direction
+from .forward import Simulation
+from .frames import cfd_to_north_rotation
+from .mount import Mount
+
+__all__ = ["PeriodicSpline", "ResponseTable"]
+
+#: Two tabulated directions closer than this (degrees, modulo 360) count as duplicates.
+DUPLICATE_TOL = 1e-9
+
+
+def _host_float(value, name: str) -> np.ndarray:
+    if not is_concrete(value):
+        raise ValueError(
+            f"ResponseTable: `{name}` must be concrete (build tables outside jit); got a tracer."
+        )
+    return np.asarray(value, dtype=np.float64)
+
+
+def _spline_coefficients(knots: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Periodic cubic spline coefficients ``(4, s, ...)`` in the normalised interval
+    coordinate ``t = (x - knot_k) / width_k``: ``value = c0 + c1 t + c2 t^2 + c3 t^3``."""
+    x = np.append(knots, knots[0] + 360.0)
+    y = np.concatenate([values, values[:1]], axis=0)
+    c = CubicSpline(x, y, axis=0, bc_type="periodic").c  # (4, s, ...), c[m] * (x - x_k)**(3-m)
+    w = np.diff(x).reshape((-1,) + (1,) * (values.ndim - 1))
+    return np.stack([c[3], c[2] * w, c[1] * w**2, c[0] * w**3])
+
+
+def locate(start, offsets, widths, uniform: bool, direction):
+    """Interval index ``k`` and normalised position ``t`` in ``[0, 1)`` of `direction`
+    (degrees, any real) among periodic knots ``start + offsets`` with `widths`."""
+    s = offsets.shape[0]
+    x = jnp.mod(direction - start, 360.0)
+    x = jnp.where(x >= 360.0, x - 360.0, x)  # mod can round up to the period
+    if uniform:
+        k = jnp.floor(x / widths[0]).astype(jnp.int32)
+    else:
+        k = jnp.searchsorted(offsets, x, side="right", method="compare_all").astype(jnp.int32) - 1
+    k = jnp.clip(k, 0, s - 1)
+    return k, (x - offsets[k]) / widths[k]
+
+
+def _cubic(c, t):
+    t = t.reshape(t.shape + (1,) * (c.ndim - 1 - t.ndim))
+    return c[0] + t * (c[1] + t * (c[2] + t * c[3]))
+
+
+class PeriodicSpline(eqx.Module):
+    """A periodic cubic spline over direction (period 360 degrees) of arrays of any shape.
+
+    Built by `ResponseTable` (coefficients precomputed on the host); call it with directions in
+    degrees ``(...)`` to get ``(..., *trailing)``. Continuous with two continuous derivatives;
+    differentiable in the direction and in its coefficients. Any real direction is accepted
+    (it is wrapped), so there is no domain to leave.
+
+    - `start`: the first knot, degrees in ``[0, 360)``.
+    - `offsets`: ``(s,)`` knots minus `start`, increasing from 0, degrees.
+    - `widths`: ``(s,)`` interval widths (the last one wraps to ``start + 360``), degrees.
+    - `coefficients`: ``(4, s, *trailing)`` cubic coefficients in ``t = (x - knot) / width``.
+    - `uniform`: equal widths, so the interval is found by a floor, not a search (static).
+    """
+
+    start: Float[Array, ""]
+    offsets: Float[Array, " s"]
+    widths: Float[Array, " s"]
+    coefficients: Float[Array, "4 s ..."]
+    uniform: bool = eqx.field(static=True)
+
+    def __call__(self, direction: Float[ArrayLike, ...]) -> Float[Array, ...]:
+        """Values at `direction` (degrees): shape ``direction.shape + trailing``."""
+        direction = jnp.asarray(direction, self.start.dtype)
+        k, t = locate(self.start, self.offsets, self.widths, self.uniform, direction)
+        return _cubic(self.coefficients[:, k], t)
+
+    def per_row(self, direction: Float[ArrayLike, "... n"]) -> Float[Array, "... n"]:
+        """Values with one direction per entry of the first trailing axis (per height):
+        `direction` ``(..., n)`` with ``n = trailing[0]`` gives ``(..., n, *trailing[1:])``."""
+        direction = jnp.asarray(direction, self.start.dtype)
+        n = self.coefficients.shape[2]
+        if direction.ndim < 1 or direction.shape[-1] != n:
+            raise ValueError(
+                f"PeriodicSpline.per_row: `direction` must be shaped (..., {n}), got "
+                f"{direction.shape}."
+            )
+        k, t = locate(self.start, self.offsets, self.widths, self.uniform, direction)
+        return _cubic(self.coefficients[:, k, jnp.arange(n)], t)
+
+    def derivative(self, direction: Float[ArrayLike, ...]) -> Float[Array, ...]:
+        """Derivative with respect to direction, per degree: ``direction.shape + trailing``."""
+        direction = jnp.asarray(direction, self.start.dtype)
+        return jax.jvp(self.__call__, (direction,), (jnp.ones_like(direction),))[1]
+
+
+def _fit(knots: np.ndarray, values: np.ndarray, dtype) -> PeriodicSpline:
+    """Spline through `values` ``(s, ...)`` at sorted unique `knots` in ``[0, 360)``."""
+    values = np.where(np.isnan(values), 0.0, values)  # all-NaN columns: masked by the table
+    coefficients = _spline_coefficients(knots, values)
+    widths = np.diff(np.append(knots, knots[0] + 360.0))
+    uniform = bool(np.allclose(widths, widths[0], rtol=0.0, atol=1e-9))
+    return PeriodicSpline(
+        jnp.asarray(knots[0], dtype),
+        jnp.asarray(knots - knots[0], dtype),
+        jnp.asarray(widths, dtype),
+        jnp.asarray(coefficients, dtype),
+        uniform,
+    )
+
+
+def _dtype_of(value):
+    """A float32 (or other non-float64) input keeps its dtype; the rest get the default float."""
+    dt = getattr(value, "dtype", None)
+    if dt is not None and jnp.issubdtype(dt, jnp.floating) and dt != np.float64:
+        return jnp.dtype(dt)
+    return default_float()
+
+
+def _check_columns(name: str, arr: np.ndarray, knots: np.ndarray) -> None:
+    """NaN must be the same for every direction (a beam point inside a solid in every run)."""
+    nan = np.isnan(arr)
+    partial = nan.any(axis=0) & ~nan.all(axis=0)
+    if partial.any():
+        idx = np.argwhere(partial)[0]
+        s = int(np.argmax(nan[(slice(None),) + tuple(idx)]))
+        raise ValueError(
+            f"ResponseTable: `{name}` is NaN at direction {knots[s]:g} deg, index {tuple(idx)} "
+            f"(height, beam, ...) but finite at other directions; a spline cannot interpolate "
+            f"it. Drop that height/beam from every run or fix the CFD sampling there."
+        )
+    if np.isinf(arr).any():
+        raise ValueError(f"ResponseTable: `{name}` contains inf.")
+
+
+@eqx.filter_jit
+def _sample(field, points):
+    return field.sample(points)
+
+
+class ResponseTable(eqx.Module):
+    """What a lidar measures per unit free-stream speed, tabulated against inflow direction.
+
+    **Arguments:**
+
+    - `directions`: ``(s,)`` free-stream directions of the CFD runs, meteorological degrees
+      (from, clockwise from north); any order and spacing, unique modulo 360, at least 3.
+    - `response`: ``(s, h, b)`` LOS per unit free-stream speed (dimensionless) at each
+      height and beam. A height/beam that is NaN for *every* direction (a beam point inside a
+      solid) is kept as a missing beam; NaN for only some directions is an error.
+    - `reconstructed`: optional ``(s, h, 3)`` the instrument's reconstructed vector per unit
+      free-stream speed, north frame (for `lidarjax.invert_reconstructed` and the roses).
+    - `point`: optional ``(s, h, 3)`` velocity on the vertical above the lidar per unit
+      free-stream speed, north frame (ZephyCube's centre line).
+    - `beam_velocity`: optional ``(s, h, b, 3)`` velocity at the beam points per unit speed,
+      north frame (ZephyCube's scalar correction).
+    - `beam_vectors`: optional ``(b, 3)`` beam unit vectors, north frame.
+    - `heights`: optional ``(h,)`` measurement heights above the lidar, m.
+
+    The table is stored sorted by direction in ``[0, 360)``; the dtype follows `response`
+    (float32 stays float32, anything else becomes the default float). Build tables outside
+    `jit` (the spline coefficients are computed on the host). Raises `ValueError` for bad
+    shapes, duplicate directions, or NaN patterns a spline cannot honour.
+
+    Evaluate with `response_at` etc.; the splines themselves (`response_spline`, ...) are
+    `PeriodicSpline`s with the height axis first in their trailing shape.
+    """
+
+    directions: Float[Array, " s"]
+    response: Float[Array, "s h b"]
+    valid: Bool[Array, "h b"]
+    reconstructed: Float[Array, "s h 3"] | None
+    point: Float[Array, "s h 3"] | None
+    beam_velocity: Float[Array, "s h b 3"] | None
+    beam_vectors: Float[Array, "b 3"] | None
+    heights: Float[Array, " h"] | None
+    response_spline: PeriodicSpline
+    reconstructed_spline: PeriodicSpline | None
+    point_spline: PeriodicSpline | None
+    beam_velocity_spline: PeriodicSpline | None
+
+    def __init__(
+        self,
+        directions: Float[ArrayLike, " s"],
+        response: Float[ArrayLike, "s h b"],
+        *,
+        reconstructed: Float[ArrayLike, "s h 3"] | None = None,
+        point: Float[ArrayLike, "s h 3"] | None = None,
+        beam_velocity: Float[ArrayLike, "s h b 3"] | None = None,
+        beam_vectors: Float[ArrayLike, "b 3"] | None = None,
+        heights: Float[ArrayLike, " h"] | None = None,
+    ):
+        dtype = _dtype_of(response)
+        d = _host_float(directions, "directions")
+        r = _host_float(response, "response")
+        if d.ndim != 1 or d.size < 3:
+            raise ValueError(
+                f"ResponseTable: `directions` must be a 1-D array of at least 3 inflow directions "
+                f"in degrees, got shape {d.shape}."
+            )
+        if not np.all(np.isfinite(d)):
+            raise ValueError(
+                f"ResponseTable: `directions` must be finite degrees, got {d.tolist()}."
+            )
+        if r.ndim != 3 or r.shape[0] != d.size:
+            raise ValueError(
+                f"ResponseTable: `response` must be shaped (s, h, b) = ({d.size}, heights, beams) "
+                f"for {d.size} directions, got shape {r.shape}."
+            )
+        if r.shape[1] == 0 or r.shape[2] == 0:
+            raise ValueError(f"ResponseTable: `response` has no heights or beams: {r.shape}.")
+        wrapped = np.mod(d, 360.0)
+        wrapped = np.where(wrapped >= 360.0, 0.0, wrapped)
+        order = np.argsort(wrapped, kind="stable")
+        knots = wrapped[order]
+        gaps = np.diff(np.append(knots, knots[0] + 360.0))
+        if np.any(gaps <= DUPLICATE_TOL):
+            k = int(np.argmin(gaps))
+            raise ValueError(
+                f"ResponseTable: `directions` must be unique modulo 360; {knots[k]:g} deg appears "
+                f"twice (e.g. 0 and 360). Drop or average the duplicate runs."
+            )
+        s, h, b = r.shape
+        r = r[order]
+        _check_columns("response", r, knots)
+        self.directions = jnp.asarray(knots, dtype)
+        self.response = jnp.asarray(r, dtype)
+        self.valid = jnp.asarray(~np.isnan(r).all(axis=0))
+        self.response_spline = _fit(knots, r, dtype)
+
+        def optional(name, value, shape):
+            if value is None:
+                return None, None
+            a = _host_float(value, name)
+            if a.shape != shape:
+                raise ValueError(
+                    f"ResponseTable: `{name}` must be shaped {shape} to match `response` "
+                    f"(s, h, b) = {r.shape}; got {a.shape}."
+                )
+            a = a[order]
+            _check_columns(name, a, knots)
+            return jnp.asarray(a, dtype), _fit(knots, a, dtype)
+
+        self.reconstructed, self.reconstructed_spline = optional(
+            "reconstructed", reconstructed, (s, h, 3)
+        )
+        self.point, self.point_spline = optional("point", point, (s, h, 3))
+        self.beam_velocity, self.beam_velocity_spline = optional(
+            "beam_velocity", beam_velocity, (s, h, b, 3)
+        )
+        if beam_vectors is None:
+            self.beam_vectors = None
+        else:
+            n = _host_float(beam_vectors, "beam_vectors")
+            if n.shape != (b, 3) or not np.allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-6):
+                raise ValueError(
+                    f"ResponseTable: `beam_vectors` must be ({b}, 3) unit vectors (north frame), "
+                    f"got shape {n.shape}."
+                )
+            self.beam_vectors = jnp.asarray(n, dtype)
+        if heights is None:
+            self.heights = None
+        else:
+            hh = _host_float(heights, "heights")
+            if hh.shape != (h,):
+                raise ValueError(
+                    f"ResponseTable: `heights` must be shaped ({h},), got {hh.shape}."
+                )
+            self.heights = jnp.asarray(hh, dtype)
+
+    # ----------------------------------------------------------------------------------------
+    @property
+    def n_directions(self) -> int:
+        """Number of tabulated directions ``s``."""
+        return self.directions.shape[0]
+
+    @property
+    def n_heights(self) -> int:
+        """Number of heights ``h``."""
+        return self.response.shape[1]
+
+    @property
+    def n_beams(self) -> int:
+        """Number of beams ``b``."""
+        return self.response.shape[2]
+
+    @property
+    def dtype(self):
+        """Floating dtype of the table."""
+        return self.response.dtype
+
+    def _need(self, spline, name):
+        if spline is None:
+            raise ValueError(
+                f"ResponseTable: this table has no `{name}`; build it with `{name}=...` or with "
+                f"ResponseTable.from_simulations(...)"
+                + (" and `mount=`/`fields=`." if name in ("point", "beam_velocity") else ".")
+            )
+        return spline
+
+    def response_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h b"]:
+        """LOS per unit free-stream speed at meteorological `direction` (degrees, one per
+        record, the same for all heights): ``(..., h, b)``; NaN for missing beams."""
+        out = self.response_spline(direction)
+        return jnp.where(self.valid, out, jnp.nan)
+
+    def reconstructed_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h 3"]:
+        """Instrument's reconstructed vector per unit free-stream speed, north frame."""
+        return self._need(self.reconstructed_spline, "reconstructed")(direction)
+
+    def point_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h 3"]:
+        """Velocity on the vertical above the lidar per unit free-stream speed, north frame."""
+        return self._need(self.point_spline, "point")(direction)
+
+    def beam_velocity_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h b 3"]:
+        """Velocity at the beam points per unit free-stream speed, north frame."""
+        return self._need(self.beam_velocity_spline, "beam_velocity")(direction)
+
+    def centre_projection_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h b"]:
+        """Centre-line velocity projected on each beam, per unit free-stream speed: the
+        numerator of ZephyCube's per-beam speed-up (`response_at` is the denominator)."""
+        if self.beam_vectors is None:
+            raise ValueError(
+                "ResponseTable: this table has no `beam_vectors`; pass `mount=` to "
+                "ResponseTable.from_simulations (or `beam_vectors=`)."
+            )
+        p = self.point_at(direction)
+        return jnp.einsum("...hk,bk->...hb", p, self.beam_vectors)
+
+    # ----------------------------------------------------------------------------------------
+    @classmethod
+    def from_simulations(
+        cls,
+        sims: Simulation | Sequence[Simulation],
+        *,
+        mount: Mount | Sequence[Mount] | None = None,
+        fields: Sequence | None = None,
+    ) -> ResponseTable:
+        """A table from `lidarjax.simulate` results, one per CFD run (inflow direction).
+
+        **Arguments:**
+
+        - `sims`: a sequence of `Simulation`s (or one `Simulation` whose arrays carry a
+          leading run axis, e.g. from `jax.vmap`), each made with ``u_ref`` (the run's free
+          stream) and the same heights and beams.
+        - `mount`: the `Mount` of the runs (or one per run, for runs that rotate the
+          platform by ``beta`` instead of the inflow). Needed for `beam_vectors` (and so the
+          centre-line projections of ZephyCube's vector correction) and for `fields`.
+        - `fields`: optional sequence of the runs' fields (one per run); the velocity at the
+          beam points is sampled from them for ZephyCube's scalar correction.
+
+        Each run gives direction ``wind_direction(free_velocity)`` and, divided by
+        ``horizontal_speed(free_velocity)``: `response` from ``los``, `reconstructed` from
+        ``lidar_velocity`` and `point` from ``point_velocity`` (all north frame).
+        """
+        if isinstance(sims, Simulation):
+            stacked = sims
+            if stacked.los.ndim != 3:
+                raise ValueError(
+                    "ResponseTable.from_simulations: a single Simulation must carry a leading "
+                    "run axis (los shaped (s, h, b)); pass a list of Simulations otherwise."
+                )
+        else:
+            sims = list(sims)
+            if not sims or not all(isinstance(x, Simulation) for x in sims):
+                raise ValueError(
+                    "ResponseTable.from_simulations: `sims` must be a non-empty sequence of "
+                    "lidarjax.Simulation."
+                )
+            shapes = {tuple(x.los.shape) for x in sims}
+            if len(shapes) != 1:
+                raise ValueError(
+                    f"ResponseTable.from_simulations: every run needs the same heights and beams; "
+                    f"got LOS shapes {sorted(shapes)}."
+                )
+            stacked = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *sims)
+        if stacked.free_velocity is None:
+            raise ValueError(
+                "ResponseTable.from_simulations: the simulations carry no free stream; run "
+                "lidarjax.simulate(..., u_ref=...) with each run's free-stream vector."
+            )
+        free = np.asarray(stacked.free_velocity, np.float64)
+        s = free.shape[0]
+        speed = np.asarray(horizontal_speed(free))
+        if not np.all(speed > 0):
+            raise ValueError(
+                "ResponseTable.from_simulations: every run needs a nonzero horizontal free "
+                "stream (u_ref) to normalise by."
+            )
+        directions = np.asarray(wind_direction(free))
+        heights = np.asarray(stacked.heights, np.float64)
+        if not np.allclose(heights, heights[:1]):
+            raise ValueError("ResponseTable.from_simulations: the runs have different heights.")
+        dtype = stacked.los.dtype
+        norm = lambda a: np.asarray(a, np.float64) / speed.reshape((s,) + (1,) * (a.ndim - 1))  # noqa: E731
+        response = norm(stacked.los)
+        reconstructed = norm(stacked.lidar_velocity)
+        point = None if stacked.point_velocity is None else norm(stacked.point_velocity)
+        beam_vectors = beam_velocity = None
+        if mount is not None:
+            mounts = [mount] * s if isinstance(mount, Mount) else list(mount)
+            if len(mounts) != s or not all(isinstance(m, Mount) for m in mounts):
+                raise ValueError(
+                    f"ResponseTable.from_simulations: `mount` must be a Mount or {s} Mounts."
+                )
+            rot = np.stack([np.asarray(cfd_to_north_rotation(m), np.float64) for m in mounts])
+            dirs = np.asarray(stacked.directions, np.float64)  # (s, b, 3) CFD frame
+            n_north = np.einsum("sij,sbj->sbi", rot, dirs)
+            if not np.allclose(n_north, n_north[:1], atol=1e-6):
+                raise ValueError(
+                    "ResponseTable.from_simulations: the beams point in different north-frame "
+                    "directions in different runs; check the mounts (epsilon, psi, beta, gamma)."
+                )
+            beam_vectors = n_north[0]
+            if fields is not None:
+                fields = list(fields)
+                if len(fields) != s:
+                    raise ValueError(
+                        f"ResponseTable.from_simulations: `fields` needs one field per run ({s})."
+                    )
+                vel = np.stack(
+                    [np.asarray(_sample(f, stacked.points[i]), np.float64)
+                     for i, f in enumerate(fields)]
+                )
+                beam_velocity = norm(np.einsum("sij,shbj->shbi", rot, vel))
+        elif fields is not None:
+            raise ValueError(
+                "ResponseTable.from_simulations: `fields` needs `mount` to rotate the sampled "
+                "velocities into the north frame."
+            )
+        cast = lambda a: None if a is None else np.asarray(a).astype(dtype)  # noqa: E731
+        return cls(
+            directions,
+            cast(response),
+            reconstructed=cast(reconstructed),
+            point=cast(point),
+            beam_velocity=cast(beam_velocity),
+            beam_vectors=cast(beam_vectors),
+            heights=cast(heights[0]),
+        )
