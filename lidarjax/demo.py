@@ -1,32 +1,53 @@
-"""The built-in demonstration scene: lidars on a hemispherical 'platform' (seed 003, fig. 4).
+"""`lidarjax demo`: the whole job on a built-in platform scene, with no input files.
 
-A hemisphere of radius ``H`` stands in for the platform deck; the lidar sits just above its
-surface, off the crown. Twelve CFD runs (inflow every 30 degrees) are simulated in one
-compiled batch for Windcube V1, Windcube V2 and ZephIR, and compared with the point
-measurement directly above the lidar: ``C_U = U / U_free`` and the direction error
-``theta_free - theta`` against ``z / H``.
+The platform is a hemisphere of radius ``H = 20 m`` in potential flow (`scenes.hemisphere`),
+the CFD free stream is the seed UDF's ``(-15, 0, 0)`` m/s with ``psi = 180``, and the lidar
+sits 0.5 m above the deck, off the crown. As in the seed, the platform is rotated by
+``beta = 0, 30, ..., 330`` (12 CFD runs, one per inflow direction), so the lidar's location
+in the CFD frame turns with it. The demo
+
+1. writes the seed's ``settings.dat`` and simulates Windcube V1 and V2 (pulsed probe) and
+   ZephIR (CW probe) for the 12 runs, each scan in one compiled batch;
+2. writes the seed output files (``windcube simulation <beta> degrees.dat``, Windcube V1)
+   and self-describing CSV tables;
+3. builds the Windcube V2 response table from the 12 runs (``table.npz``);
+4. makes a month of synthetic 10-minute records at random speeds and directions (not the
+   tabulated ones; LOS noise 0.1 m/s), writes them as a Windcube ``.sta`` file, and corrects
+   them through the same path as ``lidarjax correct`` (``synthetic_corrected.csv``);
+5. draws the figures (with matplotlib): C_U and direction error against z/H (seed 003,
+   figure 4), LOS against scan azimuth with the fitted sine (figure 2), correction roses,
+   and a gradient map of which part of the flow drives the lidar's speed error.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .forward import simulate
+from .batch import simulate_sectors
+from .frames import rotation_z
 from .mount import Mount
-from .scan import windcube_v1, windcube_v2, zephir
-from .scenes import heading, hemisphere
+from .probe import CWProbe, PulsedProbe
+from .scan import reconstruct, windcube_v1, windcube_v2, zephir
+from .scenes import hemisphere
 
 #: Demo geometry (metres, m/s, degrees).
 RADIUS = 20.0
-SPEED = 10.0
-LOCATION = (4.0, 3.0, float(np.sqrt(RADIUS**2 - 4.0**2 - 3.0**2)) + 0.5)
-DIRECTIONS = np.arange(0.0, 360.0, 30.0)
-Z_OVER_H = np.array([1.1, 1.25, 1.5, 2.0, 3.0, 4.0, 5.0])
-SCANS = {"windcube_v1": windcube_v1, "windcube_v2": windcube_v2, "zephir": zephir}
+SPEED = 15.0
+U_REF = (-SPEED, 0.0, 0.0)  # the seed UDF's CFD free stream
+PSI = 180.0
+DECK = (4.0, 3.0, float(np.sqrt(RADIUS**2 - 4.0**2 - 3.0**2)) + 0.5)  # lidar, beta = 0 (CFD)
+BETAS = np.arange(0.0, 360.0, 30.0)
+HEIGHT, NH = 80.0, 16  # settings.dat: heights j * HEIGHT / NH
+SCANS = {"windcube_v1": (windcube_v1, PulsedProbe), "windcube_v2": (windcube_v2, PulsedProbe),
+         "zephir": (zephir, CWProbe)}
+N_RECORDS = 30 * 144  # a month of 10-minute records
+LOS_NOISE = 0.1  # m/s
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,51 +60,197 @@ class DemoResult:
     dtheta: dict[str, np.ndarray]
 
 
-def demo_heights() -> np.ndarray:
-    """Measurement heights above the lidar (m) for the demo's z / H values."""
-    return Z_OVER_H * RADIUS - LOCATION[2]
+def scene():
+    """The CFD run: the hemisphere 'platform' in the seed's free stream (from +x)."""
+    return hemisphere(RADIUS, SPEED, 90.0)
 
 
-def run_demo_simulations(probe=None) -> tuple[DemoResult, dict]:
-    """Simulate the three scans over the 12 directions (one compiled batch per scan)."""
-    heights = jnp.asarray(demo_heights())
-    mount = Mount(LOCATION, beta=0.0, gamma=0.0, psi=0.0, epsilon=0.0)
+def heights() -> np.ndarray:
+    """The seed's heights above the lidar, m: ``j * HEIGHT / NH``."""
+    return np.arange(1, NH + 1) * HEIGHT / NH
+
+
+def location(beta) -> np.ndarray:
+    """The lidar in the CFD frame when the platform is rotated by `beta` degrees."""
+    return np.asarray(rotation_z(beta - PSI)) @ np.asarray(rotation_z(PSI)) @ np.asarray(DECK)
+
+
+def mount_for(beta) -> Mount:
+    """The seed mount for platform rotation `beta` (gamma = epsilon = 0, psi = 180)."""
+    return Mount(location(beta), beta=beta, gamma=0.0, psi=PSI, epsilon=0.0)
+
+
+def settings():
+    """The demo's seed settings.dat contents."""
+    from .io import Settings
+
+    return Settings(zone=2, verbose=1, height=HEIGHT, nh=NH, gamma=0.0, beta=0.0, psi=PSI,
+                    epsilon=0.0, betas=BETAS,
+                    locations=np.stack([location(b) for b in BETAS]))
+
+
+def run_demo_simulations() -> tuple[DemoResult, dict]:
+    """The three scans over the 12 platform rotations, one compiled batch per scan."""
+    from .workflow import simulate_settings
+
+    st = settings()
     sims = {}
-    for name, make in SCANS.items():
-        scan = make()
-
-        def one(direction, scan=scan):
-            scene = hemisphere(RADIUS, SPEED, direction)
-            return simulate(scene, scan, mount, heights, u_ref=SPEED * heading(direction),
-                            probe=probe)
-
-        sims[name] = jax.vmap(one)(jnp.asarray(DIRECTIONS))
-    c_u, dth = {}, {}
-    any_sim = sims["windcube_v1"]
-    c_u["point"] = np.asarray(1.0 / (any_sim.cff_U / any_sim.cfp_U))
-    dth["point"] = np.asarray(any_sim.cff_th - any_sim.cfp_th)
-    for name, sim in sims.items():
+    for name, (make, probe) in SCANS.items():
+        batch = simulate_settings(st, BETAS, lambda b: scene(), make(), u_ref=U_REF,
+                                  probe=probe())
+        sims[name] = batch
+    stacked = {k: jax.tree_util.tree_map(lambda *a: np.stack(a), *v.values())
+               for k, v in sims.items()}
+    v1 = stacked["windcube_v1"]
+    c_u = {"point": np.asarray(v1.cfp_U / v1.cff_U)}
+    dth = {"point": np.asarray(v1.cff_th - v1.cfp_th)}
+    for name, sim in stacked.items():
         c_u[name] = np.asarray(1.0 / sim.cff_U)
         dth[name] = np.asarray(sim.cff_th)
-    return DemoResult(Z_OVER_H, DIRECTIONS, c_u, dth), sims
+    z_over_h = (DECK[2] + heights()) / RADIUS
+    return DemoResult(z_over_h, BETAS, c_u, dth), sims
 
 
-def format_table(result: DemoResult) -> str:
-    """Text table: per z/H, mean |C_U - 1| and max |dtheta| over the 12 directions."""
+def format_table(result: DemoResult, rows=None) -> str:
+    """Text table: per z/H, mean C_U (max |C_U - 1|) and mean (max) |dtheta| over directions."""
     cols = ["point", "windcube_v1", "windcube_v2", "zephir"]
     head = "  z/H " + "".join(f"{c:>15s}" for c in cols)
-    lines = ["C_U = U/U_free: mean over 12 directions (max |C_U - 1| in brackets)", head]
-    for k, zh in enumerate(result.z_over_h):
-        row = f"{zh:5.2f} "
+    rows = range(len(result.z_over_h)) if rows is None else rows
+    lines = ["C_U = U / U_free: mean over 12 directions (max |C_U - 1|)", head]
+    for k in rows:
+        row = f"{result.z_over_h[k]:5.2f} "
         for c in cols:
             v = result.c_u[c][:, k]
-            row += f"{np.mean(v):6.3f} ({np.max(np.abs(v - 1)):.3f})".rjust(15)
+            row += f"{np.nanmean(v):6.3f} ({np.nanmax(np.abs(v - 1)):.3f})".rjust(15)
         lines.append(row)
     lines += ["", "direction error theta_free - theta (deg): mean |error| (max |error|)", head]
-    for k, zh in enumerate(result.z_over_h):
-        row = f"{zh:5.2f} "
+    for k in rows:
+        row = f"{result.z_over_h[k]:5.2f} "
         for c in cols:
             v = np.abs(result.dtheta[c][:, k])
-            row += f"{np.mean(v):6.2f} ({np.max(v):5.2f})".rjust(15)
+            row += f"{np.nanmean(v):6.2f} ({np.nanmax(v):5.2f})".rjust(15)
         lines.append(row)
     return "\n".join(lines)
+
+
+def synthetic_records(n: int = N_RECORDS, seed: int = 0):
+    """Truth and Windcube V2 output for `n` 10-minute records at random speeds (Weibull,
+    A = 10 m/s, k = 2) and directions (uniform), with LOS noise `LOS_NOISE`.
+
+    The platform rotation of each record is its own (not a tabulated one), simulated with
+    the pulsed probe. Returns ``(time, speed, direction, los, reported_velocity)``."""
+    rng = np.random.default_rng(seed)
+    speed = 10.0 * rng.weibull(2.0, n) + 0.5
+    betas = rng.uniform(0.0, 360.0, n)
+    mounts = jax.vmap(lambda b: mount_for_traced(b))(jnp.asarray(betas))
+    sims = simulate_sectors(scene(), windcube_v2(), mounts, heights(), u_refs=jnp.asarray(U_REF),
+                            probe=PulsedProbe(), point_reference=False)
+    scale = speed / SPEED
+    los = np.asarray(sims.los) * scale[:, None, None]
+    direction = np.asarray(sims.free_direction)
+    los = los + rng.normal(scale=LOS_NOISE, size=los.shape)
+    reported = np.asarray(jax.vmap(lambda x: reconstruct(windcube_v2(), x))(jnp.asarray(los)))
+    t0 = np.datetime64("2025-01-01T00:10")
+    times = t0 + np.arange(n) * np.timedelta64(10, "m")
+    return times, speed, direction, los, reported
+
+
+def mount_for_traced(beta):
+    """`mount_for` for a traced `beta` (used under `jax.vmap`)."""
+    loc = rotation_z(beta - PSI) @ rotation_z(PSI) @ jnp.asarray(DECK)
+    return Mount(loc, beta=beta, gamma=0.0, psi=PSI, epsilon=0.0)
+
+
+def run_demo(out: Path, *, plots: bool = True, log=print) -> dict:
+    """Run everything and write it under `out`; returns a summary dict."""
+    from .io import save_table, write_seed_output, write_settings, write_sta, write_table_csv
+    from .io.seed_output import SEED_UNITS
+    from .response import ResponseTable
+    from .workflow import correct_records, seed_columns, write_corrected_csv
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    (out / "seed").mkdir(parents=True, exist_ok=True)
+    summary: dict = {}
+
+    write_settings(out / "seed" / "settings.dat", settings())
+    result, sims = run_demo_simulations()
+    for beta, sim in sims["windcube_v1"].items():
+        cols = seed_columns(sim)
+        write_seed_output(out / "seed", beta, cols, verbose=1)
+        write_table_csv(out / "seed" / f"simulation_{beta:g}.csv", cols, SEED_UNITS,
+                        {"scan": "windcube_v1", "probe": "PulsedProbe()", "beta_deg": beta})
+    log(f"[{time.perf_counter() - t0:5.1f} s] simulated V1, V2, ZephIR x 12 platform rotations; "
+        f"seed files in {out / 'seed'}")
+
+    v2 = list(sims["windcube_v2"].values())
+    table = ResponseTable.from_simulations(v2, mount=[mount_for(b) for b in BETAS])
+    save_table(out / "table.npz", table, {"scan": "windcube_v2", "probe": "PulsedProbe()",
+                                          "scene": "hemisphere R=20 m, demo"})
+
+    times, speed, direction, los, reported = synthetic_records()
+    rep_speed = np.hypot(reported[..., 0], reported[..., 1])
+    rep_dir = np.mod(np.degrees(np.arctan2(-reported[..., 0], -reported[..., 1])), 360.0)
+    write_sta(out / "synthetic.sta", times, heights(), rep_speed, rep_dir, w=reported[..., 2],
+              scan_angle=28.0, direction_offset=0.0)
+    corrected = correct_records(table, out / "synthetic.sta", noise=LOS_NOISE / np.sqrt(2.0))
+    write_corrected_csv(out / "synthetic_corrected.csv", corrected,
+                        {"records": "synthetic.sta", "table": "table.npz"})
+    truth = np.broadcast_to(speed[:, None], rep_speed.shape)
+    err_raw = rep_speed - truth
+    err_cor = corrected.speed - truth
+    dir_raw = np.abs((rep_dir - direction[:, None] + 180) % 360 - 180)
+    dir_cor = np.abs((corrected.direction - direction[:, None] + 180) % 360 - 180)
+    summary["records"] = {
+        "n_records": int(len(times)), "heights": int(NH),
+        "converged_fraction": float(np.mean(corrected.converged)),
+        "speed_bias_uncorrected": float(np.nanmean(err_raw)),
+        "speed_bias_corrected": float(np.nanmean(err_cor)),
+        "speed_rms_uncorrected": float(np.sqrt(np.nanmean(err_raw**2))),
+        "speed_rms_corrected": float(np.sqrt(np.nanmean(err_cor**2))),
+        "direction_mae_uncorrected": float(np.nanmean(dir_raw)),
+        "direction_mae_corrected": float(np.nanmean(dir_cor)),
+    }
+    log(f"[{time.perf_counter() - t0:5.1f} s] corrected {len(times)} synthetic records x {NH} "
+        f"heights from {out / 'synthetic.sta'} -> {out / 'synthetic_corrected.csv'}")
+
+    if plots:
+        try:
+            summary["plots"] = [str(p) for p in _plots(out / "plots", result, sims, table)]
+            log(f"[{time.perf_counter() - t0:5.1f} s] figures in {out / 'plots'}")
+        except ImportError as err:
+            log(f"(no figures: {err})")
+    summary["table"] = format_table(result, rows=range(0, NH, 2))
+    summary["seconds"] = time.perf_counter() - t0
+    return summary
+
+
+def _plots(folder: Path, result: DemoResult, sims: dict, table):
+    from .field import GridField
+    from .plots import plot_los_fit, plot_profiles, plot_roses, plot_sensitivity, sensitivity_map
+    from .roses import correction_rose
+
+    paths = [plot_profiles(result.z_over_h, result.c_u, result.dtheta, folder / "profiles.png",
+                           title="hemisphere platform (H = 20 m), 12 directions, probe volumes")]
+    zsim = sims["zephir"][60.0]
+    k = 5
+    scan = zephir()
+    fit = reconstruct(scan, zsim.los[k])
+    paths.append(plot_los_fit(np.asarray(scan.beam_azimuths()), zsim.los[k], fit, 30.0,
+                              folder / "los_fit.png",
+                              title=f"ZephIR at h = {float(zsim.heights[k]):g} m, beta = 60"))
+    rose = correction_rose(table, resolution=1.0)
+    cols = [1, 5, 11]
+    paths.append(plot_roses(np.asarray(rose.directions), np.asarray(rose.speed_ratio)[:, cols],
+                            np.asarray(rose.direction_addend)[:, cols],
+                            [f"h = {h:g} m" for h in heights()[cols]], folder / "roses.png",
+                            title="Windcube V2 corrections to the free stream (1 degree)"))
+    x = np.arange(-40.0, 48.0, 2.0)
+    z = np.arange(0.0, 64.0, 2.0)
+    grid = GridField.from_function(scene().sample, x, x, z)
+    mount = mount_for(0.0)
+    sens = sensitivity_map(grid, windcube_v2(), mount, 20.0, u_ref=U_REF, probe=PulsedProbe())
+    paths.append(plot_sensitivity(grid, sens, np.asarray(location(0.0)), 20.0,
+                                  folder / "sensitivity.png",
+                                  title="d(U_V2 - U_free)/dV at h = 20 m, beta = 0, pulsed probe"))
+    return paths

@@ -111,9 +111,12 @@ def plot_roses(directions, speed_ratio, direction_addend, labels, path, *, title
         d = np.asarray(data)
         for j, lab in enumerate(labels):
             ax.plot(th, np.append(d[:, j], d[0, j]), lw=1.2, label=str(lab))
-        ax.set_title(name, fontsize=10)
+        lo, hi = np.nanmin(d), np.nanmax(d)
+        pad = 0.1 * (hi - lo) if hi > lo else 0.01
+        ax.set_rlim(lo - pad, hi + pad)  # the radial axis spans the data, not from zero
+        ax.set_title(name, fontsize=10, pad=18)
     fig.axes[0].legend(loc="lower left", bbox_to_anchor=(-0.25, -0.15), fontsize=7)
-    fig.suptitle(title or "correction roses against inflow direction")
+    fig.suptitle(title or "correction roses against inflow direction", y=1.04)
     return _save(fig, path)
 
 

@@ -59,3 +59,101 @@ def test_simulate_bad_input_exits_nonzero_with_reason(seed_case, capsys, monkeyp
     err = capsys.readouterr().err.strip()
     assert err.startswith("lidarjax simulate: error:") and message in err
     assert len(err.splitlines()) == 1
+
+
+@pytest.fixture(scope="module")
+def table_path(seed_case):
+    path = seed_case / "table.npz"
+    assert main(["table", str(seed_case / "settings.dat"), "--field",
+                 str(seed_case / "runs" / "platform_{beta}.npz"), "--scan", "windcube_v2",
+                 "--out", str(path)]) == 0
+    return path
+
+
+def test_table_file_round_trip(table_path):
+    table, meta = lj.io.load_table(table_path, return_metadata=True)
+    assert (table.n_directions, table.n_heights, table.n_beams) == (4, 3, 5)
+    assert meta["scan"] == "windcube_v2" and meta["psi_deg"] == 180.0
+    np.testing.assert_allclose(table.heights, [10.0, 20.0, 30.0])
+    # directions: CFD free stream (-15, 0, 0) seen through psi = 180, gamma = 5, epsilon = 21
+    np.testing.assert_allclose(np.sort(np.asarray(table.directions)), [26.0, 116.0, 206.0, 296.0],
+                               atol=1e-9)
+
+
+def test_correct_sta_recovers_exact_model_records(seed_case, table_path):
+    table = lj.io.load_table(table_path)
+    rng = np.random.default_rng(5)
+    n = 40
+    truth_u, truth_d = rng.uniform(2.0, 25.0, n), rng.uniform(0.0, 360.0, n)
+    rep = truth_u[:, None, None] * np.asarray(table.reconstructed_at(truth_d))  # (r, h, 3)
+    time = np.datetime64("2024-03-01T00:10") + np.arange(n) * np.timedelta64(10, "m")
+    heights = np.array([5.0, 10.0, 20.0, 30.0, 40.0])  # the record has more heights
+    speed = np.full((n, 5), 7.0)
+    direction = np.full((n, 5), 90.0)
+    speed[:, 1:4] = np.hypot(rep[..., 0], rep[..., 1])
+    direction[:, 1:4] = lj.wind_direction(rep)
+    speed[3, 2] = np.nan  # a missing value stays a NaN record, nothing else changes
+    lj.io.write_sta(seed_case / "rec.sta", time, heights, speed, direction, scan_angle=28.0)
+    out = seed_case / "rec_corrected.csv"
+    assert main(["correct", "--table", str(table_path), "--records",
+                 str(seed_case / "rec.sta"), "--out", str(out), "--quiet"]) == 0
+    rows = [line.split(",") for line in out.read_text().splitlines() if not line.startswith("#")]
+    body = np.array(rows[1:])
+    assert body.shape == (n * 3, 10)
+    got = body[:, 2].astype(float).reshape(n, 3)
+    got_d = body[:, 3].astype(float).reshape(n, 3)
+    ok = np.ones((n, 3), bool)
+    ok[3, 1] = False
+    assert np.isnan(got[3, 1]) and body[3 * 3 + 1, 6] == "False"
+    # .sta values carry 4 decimals: recovered to that precision
+    np.testing.assert_allclose(got[ok], np.broadcast_to(truth_u[:, None], (n, 3))[ok], atol=2e-3)
+    dd = (got_d - truth_d[:, None] + 180) % 360 - 180
+    assert np.max(np.abs(dd[ok])) < 0.05
+
+
+def test_correct_rtd_uses_raw_beams(seed_case, table_path):
+    table = lj.io.load_table(table_path)
+    truth_u, truth_d = 9.0, 200.0
+    los = truth_u * np.asarray(table.response_at(truth_d))  # (h, b): beams 0, 90, 180, 270, V
+    header = ["ScanAngle (\u00b0)=28", "DirectionOffset (\u00b0)=0",
+              "Altitudes (m)=\t10\t20\t30", "********************"]
+    cols = ["Timestamp", "Position"] + [f"{h}m Radial Wind Speed (m/s)" for h in (10, 20, 30)]
+    rows = []
+    for k, pos in enumerate(["0", "90", "180", "270", "V"]):
+        rws = [f"{-los[j, k]:.6f}" for j in range(3)]  # .rtd: positive towards the lidar
+        rows.append("\t".join([f"2024/03/01 00:0{k + 1}:00.00", pos, *rws]))
+    text = "\n".join([f"HeaderSize={len(header)}", *header, "\t".join(cols), *rows]) + "\n"
+    path = seed_case / "rec.rtd"
+    path.write_bytes(text.encode("cp1252"))
+    assert main(["correct", "--table", str(table_path), "--records", str(path), "--quiet"]) == 0
+    body = [line.split(",") for line in (seed_case / "rec_corrected.csv").read_text().splitlines()
+            if not line.startswith(("#", "time"))]
+    assert len(body) == 3
+    np.testing.assert_allclose([float(r[2]) for r in body], truth_u, atol=1e-4)
+    np.testing.assert_allclose([float(r[3]) for r in body], truth_d, atol=1e-3)
+
+
+def test_correct_rejects_mismatched_heights(seed_case, table_path, capsys):
+    time = np.array(["2024-03-01T00:10"], dtype="datetime64[m]")
+    lj.io.write_sta(seed_case / "bad.sta", time, [40.0, 60.0], np.ones((1, 2)), np.ones((1, 2)))
+    assert main(["correct", "--table", str(table_path), "--records",
+                 str(seed_case / "bad.sta"), "--quiet"]) == 2
+    assert "heights" in capsys.readouterr().err
+
+
+def test_demo_runs_end_to_end(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    assert main(["demo", "--out", str(tmp_path / "demo")]) == 0
+    text = capsys.readouterr().out
+    assert "C_U = U / U_free" in text and "corrected" in text
+    for name in ("seed/settings.dat", "seed/windcube simulation 330 degrees.dat", "table.npz",
+                 "synthetic.sta", "synthetic_corrected.csv", "plots/profiles.png",
+                 "plots/los_fit.png", "plots/roses.png", "plots/sensitivity.png", "summary.json"):
+        assert (tmp_path / "demo" / name).is_file(), name
+    import json
+
+    summary = json.loads((tmp_path / "demo" / "summary.json").read_text())["records"]
+    assert summary["converged_fraction"] > 0.99
+    # the correction removes the platform's distortion: what is left is the LOS noise
+    assert summary["speed_rms_corrected"] < 0.5 * summary["speed_rms_uncorrected"]
+    assert abs(summary["speed_bias_corrected"]) < 0.01

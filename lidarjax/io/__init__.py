@@ -42,5 +42,8 @@ from .settings import write_settings as write_settings
 from .sta import STA_FIELDS as STA_FIELDS
 from .sta import StaRecord as StaRecord
 from .sta import read_sta as read_sta
+from .sta import write_sta as write_sta
+from .tables import load_table as load_table
+from .tables import save_table as save_table
 from .zephir import ZephirRecord as ZephirRecord
 from .zephir import read_zephir_csv as read_zephir_csv

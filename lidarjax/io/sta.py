@@ -29,7 +29,7 @@ from jaxtyping import Bool, Float, Shaped
 from ._common import PathLike, freeze, import_optional, normalise_key
 from ._windcube import header_angle, read_windcube, scalar_arrays
 
-__all__ = ["STA_FIELDS", "STA_QUANTITIES", "StaRecord", "read_sta"]
+__all__ = ["STA_FIELDS", "STA_QUANTITIES", "StaRecord", "read_sta", "write_sta"]
 
 STA_FIELDS: tuple[str, ...] = (
     "speed",
@@ -214,3 +214,77 @@ def read_sta(path: PathLike) -> StaRecord:
         scan_angle=header_angle(parsed.header, parsed.path, "ScanAngle"),
         direction_offset=header_angle(parsed.header, parsed.path, "DirectionOffset"),
     )
+
+
+def write_sta(
+    path: PathLike,
+    time,
+    heights,
+    speed,
+    direction,
+    *,
+    w=None,
+    speed_std=None,
+    availability=None,
+    scan_angle: float | None = None,
+    direction_offset: float = 0.0,
+    system: str = "lidarjax synthetic",
+) -> Any:
+    """Write a Windcube V2-layout `.sta` file (cp1252, tab separated), atomically.
+
+    Meant for synthetic records and fixtures: it writes the header keys `read_sta` uses and
+    per-altitude speed, dispersion, direction, Z-wind and availability columns.
+
+    **Arguments:** `time` ``(t,)`` datetime64 (end of interval); `heights` ``(k,)`` m;
+    `speed`, `direction` ``(t, k)`` (m/s; meteorological degrees); optional `w`,
+    `speed_std` (m/s) and `availability` (percent) ``(t, k)``; `scan_angle` and
+    `direction_offset` in degrees. NaN is written as ``NaN``.
+
+    **Returns:** the path written.
+    """
+    from pathlib import Path
+
+    from ._common import atomic_path
+
+    time = np.asarray(time, dtype="datetime64[s]")
+    heights = np.asarray(heights, dtype=np.float64)
+    t, k = time.size, heights.size
+    cols = {"Wind Speed (m/s)": speed, "Wind Speed Dispersion (m/s)": speed_std,
+            "Wind Direction (\u00b0)": direction, "Z-wind (m/s)": w,
+            "Data Availability (%)": availability}
+    arrays = {}
+    for name, value in cols.items():
+        a = np.full((t, k), np.nan) if value is None else np.asarray(value, dtype=np.float64)
+        if a.shape != (t, k):
+            raise ValueError(f"write_sta: {name} must be shaped (time, heights) = {(t, k)}, got "
+                             f"{a.shape}")
+        arrays[name] = a
+    fmt_h = [f"{h:g}" for h in heights]
+    header = [
+        "Version=lidarjax",
+        f"ID System={system}",
+        "timezone=UTC+0",
+        "********************",
+        f"ScanAngle (\u00b0)={'NA' if scan_angle is None else f'{scan_angle:g}'}",
+        f"DirectionOffset (\u00b0)={direction_offset:g}",
+        "Altitudes (m)=\t" + "\t".join(fmt_h),
+    ]
+    lines = [f"HeaderSize={len(header)}", *header, "********************"]
+    names = ["Timestamp (end of interval)"]
+    for h in fmt_h:
+        names += [f"{h}m {q}" for q in cols]
+    lines.append("\t".join(names))
+
+    def num(v):
+        return "NaN" if not np.isfinite(v) else f"{v:.4f}"
+
+    for i in range(t):
+        stamp = str(time[i].astype("datetime64[m]")).replace("-", "/").replace("T", " ")
+        row = [stamp]
+        for j in range(k):
+            row += [num(arrays[q][i, j]) for q in cols]
+        lines.append("\t".join(row) + "\t")
+    target = Path(path)
+    with atomic_path(target) as tmp, open(tmp, "x", encoding="cp1252", newline="\n") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return target
