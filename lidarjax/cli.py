@@ -41,6 +41,20 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _add_run_arguments(parser, *, default_scan: str) -> None:
+    """CFD runs, scan, free stream and probe: shared by `simulate` and `table`."""
+    parser.add_argument("--field", required=True,
+                        help="CFD field file (.npz, .nc or Fluent ASCII); '{beta}' is replaced "
+                             "by each platform rotation, e.g. 'runs/platform_{beta}.npz'")
+    parser.add_argument("--scan", choices=SCAN_CHOICES, default=default_scan)
+    parser.add_argument("--cone-angle", type=float, default=None,
+                        help="cone angle in degrees (default: the scan's, 30 / 28 / 30)")
+    parser.add_argument("--u-ref", type=_vector, default=(-15.0, 0.0, 0.0),
+                        help="free stream u,v,w in the CFD frame, m/s (default: the seed "
+                             "UDF's -15,0,0)")
+    _add_probe_arguments(parser)
+
+
 def _add_probe_arguments(parser) -> None:
     parser.add_argument("--probe", choices=("point", "pulsed", "cw"), default="point",
                         help="probe volume: point (default), pulsed (Windcube: Gaussian pulse * "
@@ -221,20 +235,11 @@ def build_parser() -> argparse.ArgumentParser:
                "--all --scan windcube_v1 --out results/",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     sim.add_argument("settings", help="the seed's settings.dat")
-    sim.add_argument("--field", required=True,
-                     help="CFD field file (.npz, .nc or Fluent ASCII); '{beta}' is replaced "
-                          "by each platform rotation, e.g. 'runs/platform_{beta}.npz'")
     which = sim.add_mutually_exclusive_group()
     which.add_argument("--beta", type=float, help="platform rotation to run (default: the "
                                                  "settings file's beta)")
     which.add_argument("--all", action="store_true", help="run every beta row, one batch")
-    sim.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v1")
-    sim.add_argument("--cone-angle", type=float, default=None,
-                     help="cone angle in degrees (default: the scan's, 30 / 28 / 30)")
-    sim.add_argument("--u-ref", type=_vector, default=(-15.0, 0.0, 0.0),
-                     help="free stream u,v,w in the CFD frame, m/s (default: the seed "
-                          "UDF's -15,0,0)")
-    _add_probe_arguments(sim)
+    _add_run_arguments(sim, default_scan="windcube_v1")
     sim.add_argument("--out", default=".", help="output folder (default: .)")
     sim.set_defaults(func=cmd_simulate)
 
@@ -246,12 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="example: lidarjax table settings.dat --field 'runs/platform_{beta}.npz' "
                "--scan windcube_v2 --out site_table.npz")
     tab.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
-    tab.add_argument("--field", required=True, help="CFD field files with '{beta}'")
-    tab.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v2")
-    tab.add_argument("--cone-angle", type=float, default=None)
-    tab.add_argument("--u-ref", type=_vector, default=(-15.0, 0.0, 0.0),
-                     help="free stream u,v,w in the CFD frame, m/s (default -15,0,0)")
-    _add_probe_arguments(tab)
+    _add_run_arguments(tab, default_scan="windcube_v2")
     tab.add_argument("--out", required=True, help="table file to write (.npz)")
     tab.set_defaults(func=cmd_table)
 

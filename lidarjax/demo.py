@@ -70,9 +70,10 @@ def heights() -> np.ndarray:
     return np.arange(1, NH + 1) * HEIGHT / NH
 
 
-def location(beta) -> np.ndarray:
-    """The lidar in the CFD frame when the platform is rotated by `beta` degrees."""
-    return np.asarray(rotation_z(beta - PSI)) @ np.asarray(rotation_z(PSI)) @ np.asarray(DECK)
+def location(beta):
+    """The lidar in the CFD frame when the platform is rotated by `beta` degrees (the deck
+    position turns by ``beta``: ``R(beta - psi) R(psi) DECK``); works on traced `beta`."""
+    return rotation_z(beta - PSI) @ rotation_z(PSI) @ jnp.asarray(DECK)
 
 
 def mount_for(beta) -> Mount:
@@ -86,7 +87,7 @@ def settings():
 
     return Settings(zone=2, verbose=1, height=HEIGHT, nh=NH, gamma=0.0, beta=0.0, psi=PSI,
                     epsilon=0.0, betas=BETAS,
-                    locations=np.stack([location(b) for b in BETAS]))
+                    locations=np.stack([np.asarray(location(b)) for b in BETAS]))
 
 
 def run_demo_simulations() -> tuple[DemoResult, dict]:
@@ -142,7 +143,7 @@ def synthetic_records(n: int = N_RECORDS, seed: int = 0):
     rng = np.random.default_rng(seed)
     speed = 10.0 * rng.weibull(2.0, n) + 0.5
     betas = rng.uniform(0.0, 360.0, n)
-    mounts = jax.vmap(lambda b: mount_for_traced(b))(jnp.asarray(betas))
+    mounts = jax.vmap(mount_for)(jnp.asarray(betas))
     sims = simulate_sectors(scene(), windcube_v2(), mounts, heights(), u_refs=jnp.asarray(U_REF),
                             probe=PulsedProbe(), point_reference=False)
     scale = speed / SPEED
@@ -153,12 +154,6 @@ def synthetic_records(n: int = N_RECORDS, seed: int = 0):
     t0 = np.datetime64("2025-01-01T00:10")
     times = t0 + np.arange(n) * np.timedelta64(10, "m")
     return times, speed, direction, los, reported
-
-
-def mount_for_traced(beta):
-    """`mount_for` for a traced `beta` (used under `jax.vmap`)."""
-    loc = rotation_z(beta - PSI) @ rotation_z(PSI) @ jnp.asarray(DECK)
-    return Mount(loc, beta=beta, gamma=0.0, psi=PSI, epsilon=0.0)
 
 
 def run_demo(out: Path, *, plots: bool = True, log=print) -> dict:

@@ -53,6 +53,13 @@ def seed_columns(sim: Simulation) -> dict[str, np.ndarray]:
     return {k: np.asarray(v, dtype=np.float64) for k, v in cols.items()}
 
 
+def settings_mounts(settings: Settings, betas: Sequence[float]) -> list[Mount]:
+    """The `Mount` of each platform rotation: the settings' location row for that beta and
+    its gamma, psi and epsilon."""
+    return [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
+                  epsilon=settings.epsilon) for b in betas]
+
+
 def simulate_settings(
     settings: Settings,
     betas: Sequence[float],
@@ -78,8 +85,7 @@ def simulate_settings(
     vmapped batch; otherwise one call per run (one compilation per distinct grid shape).
     """
     betas = [float(b) for b in betas]
-    mounts = [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
-                    epsilon=settings.epsilon) for b in betas]
+    mounts = settings_mounts(settings, betas)
     heights = jnp.asarray(settings.heights())
     fields = [field_for_beta(b) for b in betas]
     try:
@@ -110,9 +116,8 @@ def build_table(
     from .response import ResponseTable
 
     sims = simulate_settings(settings, betas, field_for_beta, scan, u_ref=u_ref, probe=probe)
-    mounts = [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
-                    epsilon=settings.epsilon) for b in sims]
-    table = ResponseTable.from_simulations(list(sims.values()), mount=mounts)
+    table = ResponseTable.from_simulations(list(sims.values()),
+                                           mount=settings_mounts(settings, list(sims)))
     return table, sims
 
 
