@@ -103,7 +103,8 @@ def _make_scan(name: str, cone: float | None):
 def cmd_simulate(args) -> int:
     from pathlib import Path
 
-    from .io import read_settings, write_seed_output, write_table_csv
+    from .io import read_settings, write_netcdf, write_seed_output, write_table_csv
+    from .io._common import have_module
     from .io.fields import load_field
     from .io.seed_output import SEED_UNITS, format_number
     from .workflow import seed_columns, simulate_settings
@@ -129,10 +130,13 @@ def cmd_simulate(args) -> int:
                 "directions": "Th_lidar/th_point: seed azimuth = (-atan2(v,u)) mod 360; "
                               "meteorological = (seed + 270) mod 360"}
         write_table_csv(out / f"simulation_{format_number(b)}.csv", cols, SEED_UNITS, meta)
+        if have_module("xarray"):
+            write_netcdf(out / f"simulation_{format_number(b)}.nc", cols, meta)
         cff = cols["cff_U"]
         print(f"{b:7.1f} {path.name:<40s} {cols['U_mag_lidar'][-1]:13.3f} "
               f"{np.nanmin(cff):8.4f}..{np.nanmax(cff):8.4f}")
-    print(f"wrote {len(sims)} seed file(s) and CSV table(s) to {out}")
+    extra = " and NetCDF" if have_module("xarray") else ""
+    print(f"wrote {len(sims)} seed file(s), CSV{extra} table(s) to {out}")
     return 0
 
 
