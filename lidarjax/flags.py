@@ -33,5 +33,5 @@ class Flag(enum.IntFlag):
     #: A probe volume reached the lidar (range <= 0) on some beam: its nodes were cut
     #: symmetrically at ``|offset| < range`` and renormalised, and the weight dropped exceeded
     #: the probe's ``tail``. The LOS is finite but averages over a shorter stretch of beam
-    #: (see `lidarjax.probe`).
+    #: (or, when no node is left, is the focus point's; see `lidarjax.probe`).
     PROBE_TRUNCATED = 32
