@@ -23,9 +23,11 @@ class Flag(enum.IntFlag):
     POINT_OUTSIDE = 2
     #: The reconstructed horizontal wind is exactly zero: its direction is undefined (NaN).
     CALM = 4
-    #: The scan's beam matrix is ill-conditioned (condition number above
-    #: `lidarjax.scan.ILL_CONDITIONED`, i.e. a very small cone angle): LOS errors are
-    #: amplified by that factor in the reconstruction.
+    #: The scan's beam matrix is ill-conditioned: condition number above
+    #: `lidarjax.scan.ILL_CONDITIONED` = 100, a cone angle below 0.81 degrees (DBS, sine fit;
+    #: 0.91 for the Windcube V2). The values are computed as usual, but LOS errors reach the
+    #: horizontal wind amplified more than 50 times (``cond / sqrt(K)`` for ``K`` evenly spaced
+    #: beams; see `lidarjax.scan`).
     ILL_CONDITIONED = 8
     #: A correction factor is NaN because its denominator is below the ratio tolerance
     #: (a component of the lidar vector is nearly zero).
