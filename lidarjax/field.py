@@ -53,9 +53,18 @@ class AbstractField(eqx.Module):
         raise NotImplementedError
 
     def sample(self, points: Float[ArrayLike, "... 3"]) -> Float[Array, "... 3"]:
-        """Velocity (m/s, CFD frame) at absolute CFD points (metres). NaN outside."""
-        points = jnp.asarray(points)
+        """Velocity (m/s, CFD frame) at absolute CFD points (metres). NaN outside.
+
+        Host (numpy or list) points are made relative to the origin in float64 before they
+        are rounded to the field's dtype, so a float32 field samples UTM-sized coordinates
+        accurately; JAX arrays are subtracted in their own precision (float32 JAX points
+        at UTM coordinates are already rounded to 0.06-0.5 m: use `sample_local`)."""
         dtype = self.dtype
+        if not isinstance(points, jax.Array) and is_concrete(points, self.origin, self.origin_lo):
+            p64 = np.asarray(points, dtype=np.float64)
+            o64 = np.asarray(self.origin, np.float64) + np.asarray(self.origin_lo, np.float64)
+            return self.sample_local(jnp.asarray((p64 - o64).astype(dtype)))
+        points = jnp.asarray(points)
         local = (points.astype(dtype) - self.origin) - self.origin_lo
         if jnp.dtype(points.dtype).itemsize > jnp.dtype(dtype).itemsize:
             # the input is wider than the field: subtract in its precision first
@@ -226,12 +235,14 @@ class GridField(AbstractField):
     ) -> GridField:
         """Grid a field given as a function of absolute CFD points ``(..., 3) -> (..., 3)``.
 
-        `fn` may be a scene's ``.sample`` or any JAX/numpy function. Nodes where it returns
-        NaN stay NaN (solid).
+        `fn` may be a scene's ``.sample`` or any JAX/numpy function. It is called with the
+        node coordinates as a float64 numpy array (so UTM-sized coordinates are not rounded
+        before `fn` sees them) and its result is cast to `dtype` (default: the result's own
+        floating dtype). Nodes where it returns NaN stay NaN (solid).
         """
         xs = [np.asarray(a, dtype=np.float64) for a in (x, y, z)]
         pts = np.stack(np.meshgrid(*xs, indexing="ij"), axis=-1)
-        vel = np.asarray(fn(jnp.asarray(pts, dtype=dtype) if dtype else pts))
+        vel = np.asarray(fn(pts))
         if dtype is None:
             dtype = vel.dtype if np.issubdtype(vel.dtype, np.floating) else default_float()
         return cls(xs[0], xs[1], xs[2], jnp.asarray(vel, dtype=dtype))
