@@ -1,11 +1,11 @@
 """Stress suite for the forward model: random valid scenes give finite numbers or a NaN that a
 flag explains, and finite gradients for every differentiable input.
 
-Scenes: a power-law shear at UTM-sized coordinates; a model-scale platform (a 0.35 m
-hemisphere, the lidar a few centimetres above its deck, heights from 3 cm) with point,
-pulsed and CW probes; a gridded platform with solid (NaN) nodes at UTM coordinates. float64
-and float32. Shapes are fixed (3 heights, Windcube V2) and each configuration is compiled
-once, so hypothesis examples never recompile.
+Scenes: a power-law shear at UTM-sized coordinates (float64, point probe); a model-scale
+platform at UTM coordinates (a 0.35 m hemisphere, the lidar 1 to 5 cm above its deck or
+flank, heights from 3 cm) seen by a 1:100 CW probe in float32; the same platform gridded,
+with solid (NaN) nodes inside the body, seen by an even-node pulsed probe in float32. Every configuration is compiled once with fixed shapes (3 heights,
+Windcube V2), so hypothesis examples never recompile. Then two regressions.
 """
 
 import functools
@@ -160,28 +160,24 @@ def deck_location(rho, theta, clearance):
                      np.sqrt(MODEL_R**2 - rho**2) + clearance])
 
 
-@functools.cache
-def model_scale(probe_name, dtype_name):
-    probe, dtype = PROBES[probe_name], DTYPES[dtype_name]
-
-    def run(p, scale):
-        speed, direction, cone, beta, gamma, psi, eps, radius = (p[i] for i in range(8))
-        heights, loc = p[8:8 + HEIGHTS], p[8 + HEIGHTS:11 + HEIGHTS]
-        scene = lj.scenes.Hemisphere(jnp.asarray(UTM, dtype), jnp.zeros(3, dtype),
-                                     radius.astype(dtype), speed.astype(dtype),
-                                     direction.astype(dtype))
-        scan = lj.Scan(jnp.array([0.0, 90.0, 180.0, 270.0]), cone, vertical=True,
-                       method="windcube_v2")
-        mount = lj.Mount(jnp.asarray(UTM) + loc, beta, gamma, psi, eps)
-        pr = probe if probe_name == "point" else probe.scaled(scale)
-        return lj.simulate(scene, scan, mount, heights.astype(dtype),
-                           u_ref=speed * lj.scenes.heading(direction), probe=pr)
-
-    return value_and_gradient(run)
+def _model_scale(p, scale):
+    """A CW probe (1:100 scale, stretched by `scale`) in float32 over the platform."""
+    speed, direction, cone, beta, gamma, psi, eps, radius = (p[i] for i in range(8))
+    heights, loc = p[8:8 + HEIGHTS], p[8 + HEIGHTS:11 + HEIGHTS]
+    f32 = jnp.float32
+    scene = lj.scenes.Hemisphere(jnp.asarray(UTM, f32), jnp.zeros(3, f32), radius.astype(f32),
+                                 speed.astype(f32), direction.astype(f32))
+    scan = lj.Scan(jnp.array([0.0, 90.0, 180.0, 270.0]), cone, vertical=True,
+                   method="windcube_v2")
+    mount = lj.Mount(jnp.asarray(UTM) + loc, beta, gamma, psi, eps)
+    return lj.simulate(scene, scan, mount, heights.astype(f32),
+                       u_ref=speed * lj.scenes.heading(direction),
+                       probe=PROBES["cw"].scaled(scale))
 
 
-@pytest.mark.parametrize("probe_name, dtype_name",
-                         [("pulsed", "float32"), ("cw", "float64")])
+model_scale = value_and_gradient(_model_scale)
+
+
 @settings(max_examples=30, deadline=None)
 @given(speed=speeds, direction=directions, cone=st.floats(5.0, 60.0), beta=angles,
        gamma=angles, psi=angles, eps=angles,
@@ -192,14 +188,14 @@ def model_scale(probe_name, dtype_name):
          heights=[0.03, 0.3, 3.0], rho=0.0, theta=0.0, clearance=0.01, scale=1.0)
 @example(speed=60.0, direction=360.0, cone=60.0, beta=90.0, gamma=0.0, psi=180.0, eps=0.0,
          heights=[0.03, 0.04, 0.05], rho=0.33, theta=1.0, clearance=0.01, scale=1.0)
-def test_model_scale_platform(probe_name, dtype_name, speed, direction, cone, beta, gamma, psi,
-                              eps, heights, rho, theta, clearance, scale):
+def test_model_scale_platform_float32(speed, direction, cone, beta, gamma, psi, eps, heights,
+                                      rho, theta, clearance, scale):
     loc = deck_location(rho, theta, clearance)
     p = jnp.asarray([speed, direction, cone, beta, gamma, psi, eps, MODEL_R, *heights, *loc])
-    (_, sim), grads = model_scale(probe_name, dtype_name)(p, jnp.asarray(scale))
-    assert sim.los.dtype == DTYPES[dtype_name]
+    (_, sim), grads = model_scale(p, jnp.asarray(scale))
+    assert sim.los.dtype == jnp.float32
     assert_finite_or_explained(sim, speed)
-    for g in grads:
+    for g in grads:  # with respect to every input, the probe's length scale included
         assert np.all(np.isfinite(np.asarray(g))), g
 
 
@@ -231,7 +227,7 @@ def gridded(probe_name, dtype_name):
     return value_and_gradient(run)
 
 
-@pytest.mark.parametrize("probe_name, dtype_name", [("point", "float32"), ("pulsed", "float64")])
+@pytest.mark.parametrize("probe_name, dtype_name", [("pulsed", "float32")])
 @settings(max_examples=30, deadline=None)
 @given(speed=speeds, cone=st.floats(5.0, 60.0), beta=angles, gamma=angles, psi=angles,
        eps=angles, heights=st.lists(st.floats(0.03, 1.5), min_size=HEIGHTS, max_size=HEIGHTS),
