@@ -58,7 +58,7 @@ class AbstractField(eqx.Module):
         Host (numpy or list) points are made relative to the origin in float64 before they
         are rounded to the field's dtype, so a float32 field samples UTM-sized coordinates
         accurately; JAX arrays are subtracted in their own precision (float32 JAX points
-        at UTM coordinates are already rounded to 0.06-0.5 m: use `sample_local`)."""
+        at UTM coordinates are already rounded to a 0.03-0.5 m grid: use `sample_local`)."""
         dtype = self.dtype
         if not isinstance(points, jax.Array) and is_concrete(points, self.origin, self.origin_lo):
             p64 = np.asarray(points, dtype=np.float64)

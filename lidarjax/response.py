@@ -454,7 +454,7 @@ class ResponseTable(eqx.Module):
                         f"ResponseTable.from_simulations: `fields` needs one field per run ({s})."
                     )
                 # the beam points in float64 from the mounts (`Simulation.points` are rounded
-                # to the working dtype: 0.06-0.5 m at UTM coordinates in float32), made
+                # to the working dtype: a 0.03-0.5 m grid at UTM coordinates in float32), made
                 # relative to each field's origin before rounding
                 h64 = np.asarray(stacked.heights, np.float64)  # (s, h)
                 ranges = h64[:, :, None] / dirs[:, None, :, 2]  # (s, h, b)

@@ -1,6 +1,6 @@
 """float32 against float64 at UTM coordinates: gridding a scene, the forward model on the grid
 and the response table built from it agree to float32 rounding of the *local* coordinates,
-not of the absolute ones (0.06 m in easting, 0.5 m in northing at 6e6 m)."""
+not of the absolute ones (a 0.03 m grid in easting at 5e5 m, 0.5 m in northing at 6e6 m)."""
 
 import jax.numpy as jnp
 import numpy as np

@@ -4,8 +4,9 @@ flag explains, and finite gradients for every differentiable input.
 Scenes: a power-law shear at UTM-sized coordinates (float64, point probe); a model-scale
 platform at UTM coordinates (a 0.35 m hemisphere, the lidar 1 to 5 cm above its deck or
 flank, heights from 3 cm) seen by a 1:100 CW probe in float32; the same platform gridded,
-with solid (NaN) nodes inside the body, seen by an even-node pulsed probe in float32. Every configuration is compiled once with fixed shapes (3 heights,
-Windcube V2), so hypothesis examples never recompile. Then two regressions.
+with solid (NaN) nodes inside the body, seen by an even-node pulsed probe in float32. Every
+configuration is compiled once with fixed shapes (3 heights, Windcube V2), so hypothesis
+examples never recompile. Then two regressions.
 """
 
 import functools
