@@ -12,7 +12,11 @@ Every field (a `GridField` or an analytic scene from `lidarjax.scenes`) is an
 - ``los_local(points, directions)``: the velocity projected on unit vectors (m/s).
 
 Points outside the field's domain, or inside a solid (NaN nodes, bodies in analytic scenes),
-give NaN: never a clamped value.
+give NaN: never a clamped value. The NaN is put in by a final ``where`` over finite
+intermediate values (the jax-md ``safe_mask`` pattern), so a loss that masks NaN results out
+still has finite gradients with respect to the points, the directions and the field values.
+A custom field should do the same: compute its values on safe (finite) stand-ins and insert
+NaN last.
 """
 
 from __future__ import annotations
@@ -49,9 +53,18 @@ class AbstractField(eqx.Module):
         raise NotImplementedError
 
     def sample(self, points: Float[ArrayLike, "... 3"]) -> Float[Array, "... 3"]:
-        """Velocity (m/s, CFD frame) at absolute CFD points (metres). NaN outside."""
-        points = jnp.asarray(points)
+        """Velocity (m/s, CFD frame) at absolute CFD points (metres). NaN outside.
+
+        Host (numpy or list) points are made relative to the origin in float64 before they
+        are rounded to the field's dtype, so a float32 field samples UTM-sized coordinates
+        accurately; JAX arrays are subtracted in their own precision (float32 JAX points
+        at UTM coordinates are already rounded to a 0.03-0.5 m grid: use `sample_local`)."""
         dtype = self.dtype
+        if not isinstance(points, jax.Array) and is_concrete(points, self.origin, self.origin_lo):
+            p64 = np.asarray(points, dtype=np.float64)
+            o64 = np.asarray(self.origin, np.float64) + np.asarray(self.origin_lo, np.float64)
+            return self.sample_local(jnp.asarray((p64 - o64).astype(dtype)))
+        points = jnp.asarray(points)
         local = (points.astype(dtype) - self.origin) - self.origin_lo
         if jnp.dtype(points.dtype).itemsize > jnp.dtype(dtype).itemsize:
             # the input is wider than the field: subtract in its precision first
@@ -61,8 +74,15 @@ class AbstractField(eqx.Module):
     def los_local(
         self, points: Float[Array, "... 3"], directions: Float[Array, "... 3"]
     ) -> Float[Array, ...]:
-        """Velocity at local points projected on unit `directions` (m/s, + along direction)."""
-        return jnp.sum(self.sample_local(points) * directions, axis=-1)
+        """Velocity at local points projected on unit `directions` (m/s, + along direction).
+
+        NaN where the velocity is NaN, inserted after the projection so that the gradient
+        with respect to `directions` stays finite there (a NaN times a zero cotangent would
+        be NaN)."""
+        v = self.sample_local(points)
+        ok = jnp.all(jnp.isfinite(v), axis=-1)
+        v = jnp.where(ok[..., None], v, 0.0)
+        return jnp.where(ok, jnp.sum(v * directions, axis=-1), jnp.nan)
 
 
 def _check_axis(name: str, values) -> np.ndarray:
@@ -100,8 +120,8 @@ class GridField(AbstractField):
       spacing is detected (to the input's floating resolution) and uses O(1) index
       arithmetic; stretched axes use a binary search.
     - `velocity`: ``(nx, ny, nz, 3)`` velocities ``(u, v, w)`` in m/s in the CFD frame. NaN
-      marks solid nodes; any point in a cell touching one samples to NaN. Its floating
-      dtype is the field's working dtype.
+      marks solid nodes; any point in a cell touching one samples to NaN (inf is refused).
+      Its floating dtype is the field's working dtype.
     - `uniform`: per-axis override of the uniform-spacing detection (needed only when the
       coordinates are traced, e.g. built inside `jax.jit`).
 
@@ -135,6 +155,10 @@ class GridField(AbstractField):
             velocity = velocity.astype(default_float())
         dtype = velocity.dtype
         axes = (x, y, z)
+        if is_concrete(velocity) and bool(jnp.any(jnp.isinf(velocity))):
+            raise ValueError(
+                "GridField: velocity contains inf; mark solid or missing nodes with NaN."
+            )
         if is_concrete(x, y, z):
             arrays = [_check_axis(n, a) for n, a in zip("xyz", axes, strict=True)]
             shape = tuple(a.size for a in arrays)
@@ -211,12 +235,14 @@ class GridField(AbstractField):
     ) -> GridField:
         """Grid a field given as a function of absolute CFD points ``(..., 3) -> (..., 3)``.
 
-        `fn` may be a scene's ``.sample`` or any JAX/numpy function. Nodes where it returns
-        NaN stay NaN (solid).
+        `fn` may be a scene's ``.sample`` or any JAX/numpy function. It is called with the
+        node coordinates as a float64 numpy array (so UTM-sized coordinates are not rounded
+        before `fn` sees them) and its result is cast to `dtype` (default: the result's own
+        floating dtype). Nodes where it returns NaN stay NaN (solid).
         """
         xs = [np.asarray(a, dtype=np.float64) for a in (x, y, z)]
         pts = np.stack(np.meshgrid(*xs, indexing="ij"), axis=-1)
-        vel = np.asarray(fn(jnp.asarray(pts, dtype=dtype) if dtype else pts))
+        vel = np.asarray(fn(pts))
         if dtype is None:
             dtype = vel.dtype if np.issubdtype(vel.dtype, np.floating) else default_float()
         return cls(xs[0], xs[1], xs[2], jnp.asarray(vel, dtype=dtype))
@@ -299,10 +325,15 @@ class GridField(AbstractField):
         i0 = jnp.where(inside, i0, 0).astype(jnp.int32)
         return i0, t, inside
 
-    def _cell_columns(self, points):
+    def _cell_columns(self, points, safe: bool):
         """Gather the cell of every point: four ``(..., 6)`` runs ``(u, v, w)`` of the lower
         and upper ``z`` node of the columns ``(i, j), (i, j+1), (i+1, j), (i+1, j+1)``, the
-        fractions ``(tx, ty, tz)`` and the inside mask."""
+        fractions ``(tx, ty, tz)`` and the mask of points inside the grid.
+
+        With `safe` (the derivative path, see `_grid_sample`), the mask also excludes cells
+        touching a solid (NaN) node, and the runs and fractions are zeroed outside it,
+        so everything downstream is finite.
+        """
         _, ny, nz = self.shape
         if self.velocity.size >= 2**31:
             raise ValueError(
@@ -330,7 +361,14 @@ class GridField(AbstractField):
 
         sy, sx = 3 * nz, 3 * ny * nz
         columns = (run(0), run(sy), run(sx), run(sx + sy))
-        return columns, (tx, ty, tz), ix & iy & iz
+        inside = ix & iy & iz
+        t = (tx, ty, tz)
+        if safe:
+            total = columns[0] + columns[1] + columns[2] + columns[3]
+            inside = inside & ~jnp.any(jnp.isnan(total), axis=-1)
+            columns = tuple(jnp.where(inside[..., None], c, 0.0) for c in columns)
+            t = tuple(jnp.where(inside, tt, 0.0) for tt in t)
+        return columns, t, inside
 
     @staticmethod
     def _lerp_cell(values, t):
@@ -347,22 +385,28 @@ class GridField(AbstractField):
     def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
         """Trilinear velocity (m/s, CFD frame) at points relative to `origin` (metres).
 
-        Outside the grid, or in a cell touching a NaN node: NaN.
+        Outside the grid, or in a cell touching a NaN node: NaN (with finite gradients).
         """
-        points = jnp.asarray(points).astype(self.dtype)
-        columns, t, inside = self._cell_columns(points)
-        t = [tt[..., None] for tt in t]
-        val = self._lerp_cell([(c[..., 0:3], c[..., 3:6]) for c in columns], t)
-        return jnp.where(inside[..., None], val, jnp.nan)
+        return _grid_sample(self, jnp.asarray(points).astype(self.dtype))
 
     def los_local(
         self, points: Float[Array, "... 3"], directions: Float[Array, "... 3"]
     ) -> Float[Array, ...]:
         """Trilinear velocity projected on unit `directions` (m/s), projected at the corners
-        so the gather, the dot product and the lerps fuse into one loop."""
+        so the gather, the dot product and the lerps fuse into one loop. NaN as in
+        `sample_local`."""
         points = jnp.asarray(points).astype(self.dtype)
-        columns, t, inside = self._cell_columns(points)
         d = jnp.broadcast_to(jnp.asarray(directions).astype(self.dtype), points.shape)
+        return _grid_los(self, points, d)
+
+    def _sample(self, points, safe: bool):
+        columns, t, inside = self._cell_columns(points, safe)
+        t = [tt[..., None] for tt in t]
+        val = self._lerp_cell([(c[..., 0:3], c[..., 3:6]) for c in columns], t)
+        return jnp.where(inside[..., None], val, jnp.nan)
+
+    def _los(self, points, d, safe: bool):
+        columns, t, inside = self._cell_columns(points, safe)
         dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
 
         def project(c):
@@ -373,3 +417,29 @@ class GridField(AbstractField):
 
         val = self._lerp_cell([project(c) for c in columns], t)
         return jnp.where(inside, val, jnp.nan)
+
+
+# The kernels run in two forms with equal values. The plain one lets NaN (solid) nodes flow
+# through the lerps, which keeps the gather fused into one loop (sanitising the gathered
+# nodes costs 3-4x in throughput). Derivatives use the safe form, which zeroes solid and
+# outside cells before the lerps and inserts NaN last: in the plain form `0 * NaN` would make
+# the gradient with respect to the points, directions and field values NaN even for a loss
+# that masks the NaN results out.
+@jax.custom_jvp
+def _grid_sample(field, points):
+    return field._sample(points, safe=False)
+
+
+@_grid_sample.defjvp
+def _grid_sample_jvp(primals, tangents):
+    return jax.jvp(lambda f, p: f._sample(p, safe=True), primals, tangents)
+
+
+@jax.custom_jvp
+def _grid_los(field, points, directions):
+    return field._los(points, directions, safe=False)
+
+
+@_grid_los.defjvp
+def _grid_los_jvp(primals, tangents):
+    return jax.jvp(lambda f, p, d: f._los(p, d, safe=True), primals, tangents)

@@ -23,9 +23,11 @@ class Flag(enum.IntFlag):
     POINT_OUTSIDE = 2
     #: The reconstructed horizontal wind is exactly zero: its direction is undefined (NaN).
     CALM = 4
-    #: The scan's beam matrix is ill-conditioned (condition number above
-    #: `lidarjax.scan.ILL_CONDITIONED`, i.e. a very small cone angle): LOS errors are
-    #: amplified by that factor in the reconstruction.
+    #: The scan's beam matrix is ill-conditioned: condition number above
+    #: `lidarjax.scan.ILL_CONDITIONED` = 100, a cone angle below 0.81 degrees (DBS, sine fit;
+    #: 0.91 for the Windcube V2). The values are computed as usual, but LOS errors reach the
+    #: horizontal wind amplified more than 50 times (``cond / sqrt(K)`` for ``K`` evenly spaced
+    #: beams; see `lidarjax.scan`).
     ILL_CONDITIONED = 8
     #: A correction factor is NaN because its denominator is below the ratio tolerance
     #: (a component of the lidar vector is nearly zero).
@@ -33,5 +35,5 @@ class Flag(enum.IntFlag):
     #: A probe volume reached the lidar (range <= 0) on some beam: its nodes were cut
     #: symmetrically at ``|offset| < range`` and renormalised, and the weight dropped exceeded
     #: the probe's ``tail``. The LOS is finite but averages over a shorter stretch of beam
-    #: (see `lidarjax.probe`).
+    #: (or, when no node is left, is the focus point's; see `lidarjax.probe`).
     PROBE_TRUNCATED = 32

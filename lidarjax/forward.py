@@ -183,7 +183,12 @@ def simulate(
 def _beam_los(field, origin_local, directions, ranges, probe):
     """LOS ``(h, b)`` for focus ranges ``(h, b)`` along CFD beam `directions` ``(b, 3)``,
     and ``(h, b)`` booleans: the probe's symmetric cut at the lidar dropped more than its
-    ``tail`` of weight (None for the point probe, which compiles no quadrature at all)."""
+    ``tail`` of weight (None for the point probe, which compiles no quadrature at all).
+
+    A beam is NaN when its focus (point probe) or any quadrature node ahead of the lidar is
+    outside the field or in a solid. NaN node values never meet arithmetic on the inputs
+    (they are masked before the weighted sum and put back last), so the gradients of the
+    finite results, and of a loss that masks the NaN ones, stay finite."""
     if isinstance(probe, PointProbe):
         pts = origin_local + ranges[..., None] * directions
         return field.los_local(pts, directions), None
@@ -198,10 +203,21 @@ def _beam_los(field, origin_local, directions, ranges, probe):
     ahead = jnp.abs(offsets) < ranges[..., None]
     kept = jnp.where(ahead, weights, 0)
     total = jnp.sum(kept, axis=-1)
-    los = jnp.sum(jnp.where(ahead, kept * los_q, 0), axis=-1) / total
+    usable = ahead & jnp.isfinite(los_q)
+    valid = jnp.all(usable | ~ahead, axis=-1)
+    los_q = jnp.where(usable, los_q, 0)
+    los = jnp.sum(kept * los_q, axis=-1) / jnp.where(total > 0, total, 1)
+    if offsets.shape[-1] % 2 == 0:
+        # Symmetric nodes of an odd count include the focus (offset 0), which is always
+        # kept. An even count has none: when the cut keeps no node (focus range below the
+        # innermost offset), the probe's limit is the focus itself.
+        focus = field.los_local(origin_local + ranges[..., None] * directions, directions)
+        none_kept = total <= 0
+        valid = jnp.where(none_kept, jnp.isfinite(focus), valid)
+        los = jnp.where(none_kept, jnp.where(jnp.isfinite(focus), focus, 0), los)
     tail = jnp.asarray(getattr(probe, "tail", 0.0)).astype(ranges.dtype)
     truncated = (1 - total) > tail
-    return los, truncated
+    return jnp.where(valid, los, jnp.nan), truncated
 
 
 def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
@@ -218,34 +234,45 @@ def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_ref
     ranges = heights[:, None] / n_lidar[None, :, 2]  # (h, b): h / cos(cone)
     los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)
 
+    # NaN (beams outside the field or in a solid) is masked out of every computation below
+    # and put back into the results last (the safe_mask pattern): finite results keep
+    # finite gradients, and so does a loss that masks the NaN results out.
+    beam_ok = jnp.all(jnp.isfinite(los), axis=-1)  # (h,)
+    los_safe = jnp.where(jnp.isfinite(los), los, 0)
     to_north = lidar_to_north_rotation(angles)
-    lidar_velocity = rotate(to_north, reconstruct(scan, los))
+    lidar_safe = rotate(to_north, reconstruct(scan, los_safe))
+    lidar_velocity = jnp.where(beam_ok[:, None], lidar_safe, jnp.nan)
     cfd_to_north = cfd_to_north_rotation(angles)
 
-    flags = jnp.where(jnp.any(jnp.isnan(los), axis=-1), int(Flag.BEAM_OUTSIDE), 0)
+    flags = jnp.where(beam_ok, 0, int(Flag.BEAM_OUTSIDE))
     if truncated is not None:
         flags |= jnp.where(jnp.any(truncated, axis=-1), int(Flag.PROBE_TRUNCATED), 0)
     if point_reference:
         zhat = jnp.array([0.0, 0.0, 1.0], dtype)
         v_point = field.sample_local(origin_local + heights[:, None] * zhat)
-        point_velocity = rotate(cfd_to_north, v_point)
-        flags |= jnp.where(jnp.any(jnp.isnan(point_velocity), -1), int(Flag.POINT_OUTSIDE), 0)
+        point_ok = jnp.all(jnp.isfinite(v_point), axis=-1)
+        point_safe = rotate(cfd_to_north, jnp.where(point_ok[:, None], v_point, 0))
+        point_velocity = jnp.where(point_ok[:, None], point_safe, jnp.nan)
+        flags |= jnp.where(point_ok, 0, int(Flag.POINT_OUTSIDE))
     else:
-        point_velocity = None
+        point_ok = jnp.ones(heights.shape, bool)
+        point_safe = point_velocity = None
     free_velocity = None if u_ref is None else rotate(cfd_to_north, cast(u_ref))
 
-    factors = correction_factors(lidar_velocity, point_velocity, free_velocity, ratio_tol)
+    factors = correction_factors(lidar_safe, point_safe, free_velocity, ratio_tol)
+    ratio_nan = jnp.zeros(heights.shape, bool)
+    for key, f in factors.items():
+        if f is None:
+            continue
+        ok = beam_ok & (point_ok if key.startswith("cfp") else True)
+        factors[key] = jnp.where(ok, f, jnp.nan)
+        if key in ("cff_u", "cff_v", "cff_U", "cfp_u", "cfp_v", "cfp_w", "cfp_U"):
+            ratio_nan |= ok & jnp.isnan(f)
     h2 = lidar_velocity[..., 0] ** 2 + lidar_velocity[..., 1] ** 2
     flags |= jnp.where(h2 == 0, int(Flag.CALM), 0)
     cond = scan.condition_number()
     flags |= jnp.where(cond > ILL_CONDITIONED, int(Flag.ILL_CONDITIONED), 0)
-    ratio_nan = jnp.zeros(heights.shape, bool)
-    for key in ("cff_u", "cff_v", "cff_U", "cfp_u", "cfp_v", "cfp_w", "cfp_U"):
-        f = factors[key]
-        if f is not None:
-            ratio_nan |= jnp.isnan(f)
-    lidar_ok = ~jnp.any(jnp.isnan(lidar_velocity), -1)
-    flags |= jnp.where(ratio_nan & lidar_ok, int(Flag.RATIO_UNDEFINED), 0)
+    flags |= jnp.where(ratio_nan, int(Flag.RATIO_UNDEFINED), 0)
 
     points = field.origin + (origin_local + ranges[..., None] * n_cfd) + field.origin_lo
     return Simulation(

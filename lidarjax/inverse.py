@@ -147,42 +147,43 @@ def _residuals(y, args):
     return sw * (los - speed * _row(geom, coefficients, hidx, d))
 
 
-def _solve_one(los, w, hidx, noise, k, u0, knots, geom, coefficients, cfg):
-    """One record-height: `los`, `w` ``(b,)`` (cleaned: unusable beams have ``w = 0`` and
-    ``los = 0``); `noise` scalar (NaN: estimate); start ``(k, u0)``: tabulated direction index
-    and its closed-form speed."""
+def _solve_one(los, w, hidx, noise, k, u0, scale, knots, geom, coefficients, cfg):
+    """One record-height, in units of `scale` (the record's weighted RMS LOS, m/s; 1 for an
+    all-zero record): `los`, `w` ``(b,)`` (cleaned: unusable beams have ``w = 0`` and
+    ``los = 0``), `los` divided by `scale`; `noise` scalar in m/s (NaN: estimate); start
+    ``(k, u0)``: tabulated direction index and its closed-form speed in units of `scale`.
+
+    Working in these units keeps the solver's tolerances relative (it behaves the same at
+    0.01 and 100 m/s) and keeps every square (residuals, Jacobian products) in range: in
+    float32 the LOS of a record below ~1e-19 m/s or above ~1e19 m/s would otherwise
+    underflow or overflow when squared."""
     solver, max_steps, min_beams = cfg
     dtype = los.dtype
     usable = w > 0
     n_beams = jnp.sum(usable.astype(jnp.int32))
     sw = jnp.sqrt(jnp.where(usable, w, 1.0)) * usable
     d0 = jnp.deg2rad(knots[k])
-    y0 = jax.lax.stop_gradient(jnp.stack([-u0 * jnp.sin(d0), -u0 * jnp.cos(d0)]))
+    unit = jnp.stack([-jnp.sin(d0), -jnp.cos(d0)])
 
     # A problem the solver cannot start (no tabulated direction fits a positive speed, so
     # the answer is calm; or too few beams) is swapped for a trivial one (the table's own
     # response at the start direction, solved at the first step) and its outputs overridden.
     calm_start = u0 <= 0
     trivial = calm_start | (n_beams < min_beams)
-    unit = jnp.stack([-jnp.sin(d0), -jnp.cos(d0)])
-    # Solve in units of the record's weighted RMS LOS, so tolerances are relative and the
-    # solver behaves the same at 0.01 and 100 m/s.
-    scale = jnp.sqrt(jnp.sum(w * los * los) / jnp.where(jnp.sum(w) > 0, jnp.sum(w), 1.0))
-    scale = jax.lax.stop_gradient(jnp.where(trivial | ~(scale > 0), 1.0, scale))
     args = (
-        jnp.where(trivial, _row(geom, coefficients, hidx, knots[k]), los / scale),
+        jnp.where(trivial, _row(geom, coefficients, hidx, knots[k]), los),
         jnp.where(trivial, jnp.ones_like(sw), sw),
         hidx,
         geom,
         coefficients,
     )
-    y0 = jnp.where(trivial, unit, y0 / scale)
+    y0 = jax.lax.stop_gradient(jnp.where(trivial, unit, u0 * unit))
     sol = optx.least_squares(_residuals, solver, y0, args, max_steps=max_steps, throw=False)
-    y = jnp.where(trivial, 0.0, sol.value * scale)
+    y = jnp.where(trivial, 0.0, sol.value)
     speed, d, calm = _polar(y)
     d = jnp.where(calm, knots[k], d)  # a direction for the calm Jacobian (speed variance)
 
-    # Jacobian in (U, d [degrees]) at the solution.
+    # Jacobian in (U, d [degrees]) at the solution (U in units of `scale`).
     r_d, dr_d = jax.jvp(lambda x: _row(geom, coefficients, hidx, x), (d,), (jnp.ones_like(d),))
     resid = los - speed * r_d
     wrss = jnp.sum(w * resid * resid)
@@ -191,7 +192,7 @@ def _solve_one(los, w, hidx, noise, k, u0, knots, geom, coefficients, cfg):
     residual_rms = jnp.where(wsum > 0, residual_rms, jnp.nan)
     dof = n_beams - 2
     sigma2_est = jnp.where(dof > 0, wrss / jnp.maximum(dof, 1), jnp.nan)
-    sigma2 = jnp.where(jnp.isnan(noise), sigma2_est, noise * noise)
+    sigma2 = jnp.where(jnp.isnan(noise), sigma2_est, (noise / scale) ** 2)
     m_uu = jnp.sum(w * r_d * r_d)
     m_ud = jnp.sum(w * r_d * dr_d) * speed
     m_dd = jnp.sum(w * dr_d * dr_d) * speed * speed
@@ -227,13 +228,13 @@ def _solve_one(los, w, hidx, noise, k, u0, knots, geom, coefficients, cfg):
     direction = jnp.mod(d, 360.0)
     direction = jnp.where(direction >= 360.0, direction - 360.0, direction)
     out = dict(
-        speed=jnp.where(converged, speed, nan),
+        speed=jnp.where(converged, speed * scale, nan),
         direction=jnp.where(converged & ~calm, direction, nan),
         converged=converged,
-        residual_rms=residual_rms,
-        speed_std=jnp.where(converged, jnp.sqrt(var_u), nan),
+        residual_rms=residual_rms * scale,
+        speed_std=jnp.where(converged, jnp.sqrt(var_u) * scale, nan),
         direction_std=jnp.where(converged, jnp.where(calm, inf, jnp.sqrt(var_d)), nan),
-        noise=jnp.sqrt(sigma2),
+        noise=jnp.sqrt(sigma2) * scale,
         n_beams=n_beams,
         num_steps=sol.stats["num_steps"].astype(jnp.int32),
         result=sol.result,
@@ -260,6 +261,15 @@ def _solve_batch(los, w, noise, values, knots, geom, coefficients, cfg):
     usable = (w > 0) & jnp.isfinite(los)
     w = jnp.where(usable, w, 0.0)
     los = jnp.where(usable, los, 0.0)
+    # The unit of each problem: its weighted RMS LOS (m/s), computed without squaring the
+    # LOS themselves (no underflow or overflow in float32), 1 for an all-zero record.
+    peak = jnp.max(jnp.abs(los), axis=-1)
+    peak = jnp.where(peak > 0, peak, 1.0)
+    wsum = jnp.sum(w, axis=-1)
+    x = los / peak[..., None]
+    scale = peak * jnp.sqrt(jnp.sum(w * x * x, axis=-1) / jnp.where(wsum > 0, wsum, 1.0))
+    scale = jax.lax.stop_gradient(jnp.where(scale > 0, scale, 1.0))
+    los = los / scale[..., None]
     # Start: best tabulated direction with its closed-form nonnegative speed.
     a = jnp.einsum("rhb,shb->rhs", w * los, values)
     c = jnp.einsum("rhb,shb->rhs", w, values * values)
@@ -269,10 +279,11 @@ def _solve_batch(los, w, noise, values, knots, geom, coefficients, cfg):
     hidx = jnp.broadcast_to(jnp.arange(h, dtype=jnp.int32), (r, h))
     flat = lambda x: x.reshape((r * h,) + x.shape[2:])  # noqa: E731
 
-    def one(los_i, w_i, h_i, noise_i, k_i, u0_i):
-        return _solve_one(los_i, w_i, h_i, noise_i, k_i, u0_i, knots, geom, coefficients, cfg)
+    def one(los_i, w_i, h_i, noise_i, k_i, u0_i, scale_i):
+        return _solve_one(los_i, w_i, h_i, noise_i, k_i, u0_i, scale_i, knots, geom,
+                          coefficients, cfg)
 
-    out = jax.vmap(one)(*(flat(x) for x in (los, w, hidx, noise, k, u0)))
+    out = jax.vmap(one)(*(flat(x) for x in (los, w, hidx, noise, k, u0, scale)))
     return jax.tree_util.tree_map(lambda x: x.reshape((r, h) + x.shape[1:]), out)
 
 

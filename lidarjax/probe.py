@@ -53,7 +53,10 @@ already accepted). For the default pulsed probe the cut starts at focus ranges b
 47.6 m (its outermost node) and is flagged below about 41 m (e.g. the vertical beam at
 40 m; real pulsed lidars have a blind zone of that order too); for the default CW probe,
 whose support grows as ``f^2``, the cut starts at about 125 m and is flagged beyond about
-260 m. The LOS stays finite.
+260 m. The LOS stays finite. Symmetric rules with an odd node count have a node at the
+focus, which is never cut; with an even count, a focus range below the innermost offset
+would keep no node at all, and the LOS is then the focus point's (the limit of the
+symmetric cut).
 
 **Default parameters** (typical published values, used here as assumptions; set your
 instrument's):

@@ -169,8 +169,8 @@ def _check_columns(name: str, arr: np.ndarray, knots: np.ndarray) -> None:
 
 
 @eqx.filter_jit
-def _sample(field, points):
-    return field.sample(points)
+def _sample_local(field, points):
+    return field.sample_local(points)
 
 
 class ResponseTable(eqx.Module):
@@ -453,10 +453,20 @@ class ResponseTable(eqx.Module):
                     raise ValueError(
                         f"ResponseTable.from_simulations: `fields` needs one field per run ({s})."
                     )
-                vel = np.stack(
-                    [np.asarray(_sample(f, stacked.points[i]), np.float64)
-                     for i, f in enumerate(fields)]
-                )
+                # the beam points in float64 from the mounts (`Simulation.points` are rounded
+                # to the working dtype: a 0.03-0.5 m grid at UTM coordinates in float32), made
+                # relative to each field's origin before rounding
+                h64 = np.asarray(stacked.heights, np.float64)  # (s, h)
+                ranges = h64[:, :, None] / dirs[:, None, :, 2]  # (s, h, b)
+                vel = []
+                for i, f in enumerate(fields):
+                    m = mounts[i]
+                    loc = np.asarray(m.location, np.float64) + np.asarray(m.location_lo, np.float64)
+                    origin = np.asarray(f.origin, np.float64) + np.asarray(f.origin_lo, np.float64)
+                    local = (loc - origin) + ranges[i][..., None] * dirs[i][None]
+                    vel.append(np.asarray(_sample_local(f, jnp.asarray(local.astype(f.dtype))),
+                                          np.float64))
+                vel = np.stack(vel)
                 beam_velocity = norm(np.einsum("sij,shbj->shbi", rot, vel))
         elif fields is not None:
             raise ValueError(

@@ -17,6 +17,34 @@ Reconstruction methods (`Scan.method`, static):
   (seed 003, equations 5 to 8), ``u = A / sin c``, ``v = B / sin c``, ``w = C / cos c``.
 - ``"least_squares"``: ``(u, v, w)`` minimising ``sum_b (n_b . V - s_b)^2`` for any scan whose
   beam vectors span 3-D (for a single cone angle it equals ``"sine_fit"``).
+
+Conditioning. Every method solves (exactly or in effect) the linear system ``N V = s`` with
+the ``(b, 3)`` beam matrix ``N`` of the unit vectors above, so LOS errors reach the wind
+through ``N``'s condition number ``cond = sigma_max / sigma_min`` (`Scan.condition_number`).
+For ``K >= 3`` tilted beams evenly spaced in azimuth (Windcube V1's DBS: ``K = 4``; ZephIR's
+sine fit: ``K = n_los``), ``N^T N = diag(K/2 sin^2 c, K/2 sin^2 c, K cos^2 c)``, so
+
+- without a vertical beam: ``cond = sqrt(2) / tan(c)`` for ``c < 54.7`` degrees
+  (``tan(c) / sqrt(2)`` above), whatever ``K``: 2.45 at 30 degrees, 16.2 at 5, and about
+  ``81 / c`` for ``c`` in degrees near 0;
+- with a vertical beam (Windcube V2, ``K = 4``): ``cond = sqrt((4 cos^2 c + 1) / (2 sin^2 c))``
+  for ``c < 65.9`` degrees: 3.06 at 28 degrees, 18.1 at 5, about ``91 / c`` near 0.
+
+Independent LOS noise of standard deviation ``sigma`` gives reconstructed horizontal
+components of standard deviation ``sigma sqrt(2/K) / sin(c) = cond sigma / (sqrt(K) cos c)``
+(no vertical beam; ``cond sigma / sqrt(4 cos^2 c + 1)`` for the V2): the error grows like the
+condition number as the cone closes, while the vertical component stays well determined. A
+cone of 0 cannot see the horizontal wind at all. Hence two thresholds:
+
+- `ILL_CONDITIONED` (100; cone angles below 0.81 degrees for DBS and the sine fit, 0.91 for
+  the V2): `simulate` sets `lidarjax.Flag.ILL_CONDITIONED`. LOS errors reach the horizontal
+  wind amplified more than 50 times (0.1 m/s of LOS noise: over 5 m/s).
+- `MAX_CONDITION` (1e4; below 0.0081 degrees, V2 0.0091): `Scan` refuses the geometry with
+  a message naming the condition number, the cone angle and the smallest cone angle
+  accepted. Beyond it float32 rounding alone (``cond * eps ~ 1e-3`` of the wind) spoils the
+  reconstruction, and any real record is noise.
+
+The supported range of real instruments, cone angles 5 to 60 degrees, has ``cond <= 18.1``.
 """
 
 from __future__ import annotations
@@ -33,11 +61,13 @@ __all__ = ["Scan", "windcube_v1", "windcube_v2", "zephir", "reconstruct", "METHO
 
 METHODS = ("windcube_v1", "windcube_v2", "sine_fit", "least_squares")
 
-#: Largest condition number of the beam matrix accepted at construction. Beyond it the
-#: horizontal wind is not determined to any useful accuracy (a cone angle below about
-#: 0.001 degrees); `simulate` also flags condition numbers above `ILL_CONDITIONED`.
-MAX_CONDITION = 1e8
-ILL_CONDITIONED = 1e3
+#: Largest condition number of the beam matrix accepted at construction (a cone angle of
+#: 0.0081 degrees for DBS and the sine fit, 0.0091 for the Windcube V2); see the module docs.
+MAX_CONDITION = 1e4
+#: `simulate` flags condition numbers above this with `lidarjax.Flag.ILL_CONDITIONED` (cone
+#: angles below 0.81 degrees for DBS and the sine fit, 0.91 for the V2): LOS errors are
+#: amplified over 50 times in the horizontal wind. See the module docs.
+ILL_CONDITIONED = 1e2
 
 
 class Scan(eqx.Module):
@@ -102,8 +132,10 @@ class Scan(eqx.Module):
 
     def condition_number(self) -> Float[Array, ""]:
         """Condition number of the ``(b, 3)`` beam matrix: the factor by which relative LOS
-        errors can grow in the reconstructed vector. About ``1/tan(c)`` for DBS at small
-        cone angles ``c``; it diverges as the cone angle goes to 0."""
+        errors can grow in the reconstructed vector. ``sqrt(2) / tan(c)`` for evenly spaced
+        tilted beams (DBS, sine fit) at cone angles ``c`` below 54.7 degrees,
+        ``sqrt((4 cos^2 c + 1) / (2 sin^2 c))`` for the Windcube V2; it diverges as the cone
+        angle goes to 0 (see the module docs)."""
         s = jnp.linalg.svd(self.directions(), compute_uv=False)
         return s[0] / s[-1]
 
@@ -139,22 +171,63 @@ def _validate(az: np.ndarray, cone: np.ndarray, vertical: bool, method: str) -> 
             )
     if method == "sine_fit" and vertical:
         raise ValueError("Scan: method 'sine_fit' fits tilted beams only; use vertical=False.")
-    cones = np.concatenate([np.full(az.shape, float(cone)), [0.0] if vertical else []])
+    if az.size + int(vertical) < 3:
+        raise ValueError(
+            f"Scan: {az.size + int(vertical)} beams cannot determine the three wind components; "
+            f"need at least 3."
+        )
+    cond = _condition(az, float(cone), vertical)
+    if not cond <= MAX_CONDITION:
+        if _condition(az, 45.0, vertical) > ILL_CONDITIONED:
+            raise ValueError(
+                f"Scan: the beams cannot determine the wind (beam-matrix condition number "
+                f"{cond:.3g} > MAX_CONDITION = {MAX_CONDITION:.0e}); azimuths {az.tolist()} must "
+                f"span at least three distinct directions around the cone."
+            )
+        if float(cone) < 45.0:
+            raise ValueError(
+                f"Scan: cone angle {float(cone):.3g} degrees is too close to the vertical: the "
+                f"beam-matrix condition number is {cond:.3g} > MAX_CONDITION = "
+                f"{MAX_CONDITION:.0e} (about sqrt(2)/tan(cone) for evenly spaced beams), so LOS "
+                f"errors would be amplified {cond:.3g} times in the horizontal wind. Use a cone "
+                f"angle of at least {_round(_limit_cone(az, vertical, 0.0, 45.0), np.ceil):.2g} degrees (real "
+                f"instruments: 15 to 30)."
+            )
+        raise ValueError(
+            f"Scan: cone angle {float(cone):.6g} degrees is too close to the horizontal: the "
+            f"beam-matrix condition number is {cond:.3g} > MAX_CONDITION = {MAX_CONDITION:.0e}, "
+            f"so the vertical wind is not determined. Use a cone angle of at most "
+            f"{_round(_limit_cone(az, vertical, 90.0, 45.0), np.floor, 6):.6g} degrees."
+        )
+
+
+def _condition(az: np.ndarray, cone: float, vertical: bool) -> float:
+    """Beam-matrix condition number on the host, in float64 (inf when rank deficient)."""
+    cones = np.concatenate([np.full(az.shape, cone), [0.0] if vertical else []])
     azs = np.concatenate([az, [0.0] if vertical else []])
     a, c = np.deg2rad(azs), np.deg2rad(cones)
     n = np.stack([np.sin(c) * np.sin(a), np.sin(c) * np.cos(a), np.cos(c)], axis=-1)
-    if n.shape[0] < 3:
-        raise ValueError(
-            f"Scan: {n.shape[0]} beams cannot determine the three wind components; need at least 3."
-        )
     s = np.linalg.svd(n, compute_uv=False)
-    cond = s[0] / s[-1] if s[-1] > 0 else np.inf
-    if not cond <= MAX_CONDITION:
-        raise ValueError(
-            f"Scan: the beams cannot determine the wind (beam-matrix condition number {cond:.3g} "
-            f"> {MAX_CONDITION:.0e}); azimuths {az.tolist()} must span at least three distinct "
-            f"directions around the cone."
-        )
+    return float(s[0] / s[-1]) if s[-1] > 0 else np.inf
+
+
+def _round(x: float, direction, digits: int = 2) -> float:
+    """`x` rounded to `digits` significant digits by `direction` (np.ceil or np.floor)."""
+    step = 10.0 ** (np.floor(np.log10(x)) - digits + 1)
+    return float(direction(x / step) * step)
+
+
+def _limit_cone(az: np.ndarray, vertical: bool, bad: float, good: float) -> float:
+    """The cone angle (degrees) between `bad` and `good` where the condition number crosses
+    `MAX_CONDITION`, on the `good` side (bisection: the condition number is monotonic on
+    either side of its minimum near 55 degrees)."""
+    for _ in range(60):
+        mid = 0.5 * (bad + good)
+        if _condition(az, mid, vertical) > MAX_CONDITION:
+            bad = mid
+        else:
+            good = mid
+    return good
 
 
 def windcube_v1(cone_angle: float = 30.0) -> Scan:

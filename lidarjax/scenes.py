@@ -9,6 +9,9 @@ directions are meteorological (where the wind comes from, degrees clockwise from
 direction 270 blows towards ``+x``. All parameters are dynamic and differentiable; the dtype
 of the scene (and of `simulate`'s results) is that of its parameters (the default float
 unless given as arrays of another float dtype).
+
+NaN (inside a body, below the ground or the terrain) is inserted last over values computed
+at safe stand-in points, so gradients stay finite for losses that mask the NaN out.
 """
 
 from __future__ import annotations
@@ -207,9 +210,10 @@ class Hill(AbstractField):
         free = self.speed * e
         un = jnp.dot(free, nvec)
         n = jnp.sum(points * nvec, axis=-1)
-        z = points[..., 2]
         big_h, big_l = self.height, self.half_width
         ground = big_h / (1.0 + (n / big_l) ** 2)
+        above = points[..., 2] >= ground
+        z = jnp.where(above, points[..., 2], ground)  # finite below the terrain (masked)
         # 1/A^2 with A = L - i zeta = (L + z) - i n:  1/A^2 = conj(A)^2 / |A|^4
         a_re, a_im = big_l + z, -n
         den = (a_re**2 + a_im**2) ** 2
@@ -219,7 +223,7 @@ class Hill(AbstractField):
         du = scale * inv_re
         dw = -scale * inv_im
         v = free + du[..., None] * nvec + dw[..., None] * jnp.array([0.0, 0.0, 1.0], self.dtype)
-        return jnp.where((z >= ground)[..., None], v, jnp.nan)
+        return jnp.where(above[..., None], v, jnp.nan)
 
 
 def hill(

@@ -88,6 +88,7 @@ def test_gradients_wrt_points_and_values():
         (dict(velocity=np.zeros((3, 2, 2))), "shape"),
         (dict(velocity=np.zeros((3, 2, 3, 3))), "shape"),
         (dict(y=[0.0, np.inf]), "NaN or inf"),
+        (dict(velocity=np.full((3, 2, 2, 3), np.inf)), "inf"),
     ],
 )
 def test_bad_grids_raise(kwargs, message):
