@@ -203,21 +203,42 @@ def _beam_los(field, origin_local, directions, ranges, probe):
     ahead = jnp.abs(offsets) < ranges[..., None]
     kept = jnp.where(ahead, weights, 0)
     total = jnp.sum(kept, axis=-1)
-    usable = ahead & jnp.isfinite(los_q)
-    valid = jnp.all(usable | ~ahead, axis=-1)
-    los_q = jnp.where(usable, los_q, 0)
-    los = jnp.sum(kept * los_q, axis=-1) / jnp.where(total > 0, total, 1)
+    los = _probe_mean(los_q, kept, ahead)
     if offsets.shape[-1] % 2 == 0:
         # Symmetric nodes of an odd count include the focus (offset 0), which is always
         # kept. An even count has none: when the cut keeps no node (focus range below the
         # innermost offset), the probe's limit is the focus itself.
         focus = field.los_local(origin_local + ranges[..., None] * directions, directions)
-        none_kept = total <= 0
-        valid = jnp.where(none_kept, jnp.isfinite(focus), valid)
-        los = jnp.where(none_kept, jnp.where(jnp.isfinite(focus), focus, 0), los)
+        los = jnp.where(total <= 0, focus, los)
     tail = jnp.asarray(getattr(probe, "tail", 0.0)).astype(ranges.dtype)
     truncated = (1 - total) > tail
-    return jnp.where(valid, los, jnp.nan), truncated
+    return los, truncated
+
+
+@jax.custom_jvp
+def _probe_mean(los_q, kept, ahead):
+    """``sum(kept * los_q) / sum(kept)`` over the nodes ahead of the lidar (last axis), 0 when
+    none is kept; NaN when a node ahead is NaN (outside the field or in a solid).
+
+    NaN node values flow through this plain form, which keeps the field's gather fused with
+    the weighted sum (masking them first costs 5-7x in throughput). The derivative (below) is
+    written out with the NaN beams masked, so `0 * NaN` cannot reach the weights (probe
+    parameters, heights) even for a loss that masks the NaN LOS out; it is zero there."""
+    total = jnp.sum(kept, axis=-1)
+    return jnp.sum(jnp.where(ahead, kept * los_q, 0), axis=-1) / jnp.where(total > 0, total, 1)
+
+
+@_probe_mean.defjvp
+def _probe_mean_jvp(primals, tangents):
+    los_q, kept, ahead = primals
+    d_los, d_kept, _ = tangents
+    mean = _probe_mean(los_q, kept, ahead)
+    ok = jnp.isfinite(mean)
+    use = ahead & ok[..., None]
+    total = jnp.sum(kept, axis=-1)
+    d_mean = jnp.sum(jnp.where(use, kept * d_los + d_kept * los_q, 0), axis=-1)
+    d_mean = d_mean - jnp.where(ok, mean, 0) * jnp.sum(d_kept, axis=-1)
+    return mean, d_mean / jnp.where(total > 0, total, 1)
 
 
 def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
