@@ -150,12 +150,17 @@ class GridField(AbstractField):
     uniform: tuple[bool, bool, bool] = eqx.field(static=True)
 
     def __init__(self, x, y, z, velocity, *, uniform=None):
+        host = velocity if isinstance(velocity, np.ndarray) else None
         velocity = jnp.asarray(velocity)
         if not jnp.issubdtype(velocity.dtype, jnp.floating):
             velocity = velocity.astype(default_float())
         dtype = velocity.dtype
         axes = (x, y, z)
-        if is_concrete(velocity) and bool(jnp.any(jnp.isinf(velocity))):
+        if host is not None:
+            has_inf = bool(np.isinf(host).any())
+        else:
+            has_inf = is_concrete(velocity) and bool(jnp.any(jnp.isinf(velocity)))
+        if has_inf:
             raise ValueError(
                 "GridField: velocity contains inf; mark solid or missing nodes with NaN."
             )

@@ -165,7 +165,10 @@ def simulate(
     **Returns:** a `Simulation`; its dtype follows the field's.
 
     Raises `ValueError` before compiling for inputs of the wrong type, shape or range.
-    Inside the compiled function, points outside the field give NaN with a `Flag`.
+    Inside the compiled function, points outside the field give NaN with a `Flag`; the NaN
+    never meets arithmetic on the inputs, so gradients of the finite results (and of a loss
+    that masks the NaN ones out) are finite. A scan whose condition number exceeds
+    `lidarjax.scan.ILL_CONDITIONED` is flagged (see `lidarjax.scan` for the closed forms).
     """
     if probe is None:
         probe = PointProbe()
