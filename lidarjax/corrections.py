@@ -41,7 +41,7 @@ def _norm(v):
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
-def _ratio(num, den, scale, tol):
+def safe_ratio(num, den, scale, tol):
     """``num / den``, NaN unless ``scale > 0`` and ``|den| > tol * scale``.
 
     Both are divided by `scale` first, so the derivative never squares a tiny denominator.
@@ -79,18 +79,18 @@ def correction_factors(
     else:
         free_b = jnp.broadcast_to(free, lidar.shape)
         u_f = horizontal_speed(free_b)
-        out["cff_u"] = _ratio(free_b[..., 0], lidar[..., 0], scale, ratio_tol)
-        out["cff_v"] = _ratio(free_b[..., 1], lidar[..., 1], scale, ratio_tol)
-        out["cff_w"] = _ratio(free_b[..., 2] - lidar[..., 2], u_f, u_f, 0.0)
-        out["cff_U"] = _ratio(u_f, u_l, scale, ratio_tol)
+        out["cff_u"] = safe_ratio(free_b[..., 0], lidar[..., 0], scale, ratio_tol)
+        out["cff_v"] = safe_ratio(free_b[..., 1], lidar[..., 1], scale, ratio_tol)
+        out["cff_w"] = safe_ratio(free_b[..., 2] - lidar[..., 2], u_f, u_f, 0.0)
+        out["cff_U"] = safe_ratio(u_f, u_l, scale, ratio_tol)
         out["cff_th"] = direction_difference(free_b, lidar)
     names = ("cfp_u", "cfp_v", "cfp_w", "cfp_U", "cfp_th")
     if point is None:
         out.update(dict.fromkeys(names))
     else:
-        out["cfp_u"] = _ratio(point[..., 0], lidar[..., 0], scale, ratio_tol)
-        out["cfp_v"] = _ratio(point[..., 1], lidar[..., 1], scale, ratio_tol)
-        out["cfp_w"] = _ratio(point[..., 2], lidar[..., 2], scale, ratio_tol)
-        out["cfp_U"] = _ratio(horizontal_speed(point), u_l, scale, ratio_tol)
+        out["cfp_u"] = safe_ratio(point[..., 0], lidar[..., 0], scale, ratio_tol)
+        out["cfp_v"] = safe_ratio(point[..., 1], lidar[..., 1], scale, ratio_tol)
+        out["cfp_w"] = safe_ratio(point[..., 2], lidar[..., 2], scale, ratio_tol)
+        out["cfp_U"] = safe_ratio(horizontal_speed(point), u_l, scale, ratio_tol)
         out["cfp_th"] = direction_difference(point, lidar)
     return out

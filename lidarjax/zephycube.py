@@ -44,7 +44,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .angles import direction_difference, horizontal_speed, wind_direction
-from .corrections import DEFAULT_RATIO_TOL
+from .corrections import DEFAULT_RATIO_TOL, safe_ratio
 from .response import ResponseTable
 
 __all__ = [
@@ -125,11 +125,6 @@ def _dbs(los4, offset, cone):
 def _wind(uv):
     vel = jnp.concatenate([uv, jnp.zeros_like(uv[..., :1])], axis=-1)
     return Wind(horizontal_speed(vel), wind_direction(vel))
-
-
-def _ratio(num, den, scale, tol):
-    ok = jnp.abs(den) > tol * scale
-    return jnp.where(ok, num / jnp.where(ok, den, 1.0), jnp.nan)
 
 
 def _float(x, dtype=None):
@@ -229,11 +224,11 @@ def _scalar(table, speed, direction, w, alpha, offset, cone, threshold, ratio_to
     minus = beams[..., 2:4, :]
     c_plus = jnp.einsum("...hpk,pk->...hp", plus[..., :2], axes)
     c_minus = jnp.einsum("...hpk,pk->...hp", minus[..., :2], axes)
-    a_plus = _ratio(c_plus, c_centre, scale_c, ratio_tol)
-    a_minus = _ratio(c_minus, c_centre, scale_c, ratio_tol)
+    a_plus = safe_ratio(c_plus, c_centre, scale_c, ratio_tol)
+    a_minus = safe_ratio(c_minus, c_centre, scale_c, ratio_tol)
     w_centre = centre[..., 2:3]
-    b_plus = _ratio(plus[..., 2], w_centre, scale_c, ratio_tol)
-    b_minus = _ratio(minus[..., 2], w_centre, scale_c, ratio_tol)
+    b_plus = safe_ratio(plus[..., 2], w_centre, scale_c, ratio_tol)
+    b_minus = safe_ratio(minus[..., 2], w_centre, scale_c, ratio_tol)
     cot = 1.0 / np.tan(np.deg2rad(cone))
     vertical = (b_plus - b_minus) * w[..., None] * cot
     homog = jnp.abs(c_sta) < threshold
@@ -288,7 +283,7 @@ def _vector(table, los, alpha, offset, cone, ratio_tol):
     num = jnp.einsum("...hk,bk->...hb", centre, table.beam_vectors[:4])  # (..., h, 4)
     den = table.response_spline.per_row(alpha)[..., :4]
     scale = jnp.linalg.norm(centre, axis=-1)
-    su = _ratio(num, den, scale[..., None], ratio_tol)
+    su = safe_ratio(num, den, scale[..., None], ratio_tol)
     return _wind(_dbs(los[..., :4] * su, offset, cone))
 
 
