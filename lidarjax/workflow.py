@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .angles import horizontal_speed, seed_azimuth
+from .angles import horizontal_speed, seed_azimuth, wind_direction
 from .batch import simulate_sectors, stack_fields
 from .field import GridField
 from .forward import Simulation, simulate
@@ -208,9 +208,12 @@ def correct_records(
 
     p = Path(path)
     suffix = p.suffix.lower()
-    if suffix in (".sta", ".stdsta"):
-        rec = read_sta(p)
-        kind, time, heights = "sta", rec.time, rec.heights
+    reported = {".sta": ("sta", read_sta), ".stdsta": ("sta", read_sta),
+                ".csv": ("zephir", read_zephir_csv)}
+    if suffix in reported:  # the instrument's reconstructed speed and direction
+        kind, reader = reported[suffix]
+        rec = reader(p)
+        time, heights = rec.time, rec.heights
         idx = _match_heights(table.heights, heights, p)
         data = (rec.speed[:, idx], rec.direction[:, idx])
         measured = data
@@ -226,14 +229,7 @@ def correct_records(
             homog[np.isnan(los).any(-1)] = np.nan
         else:
             homog = np.full(los.shape[:-1] + (3,), np.nan)
-        measured = (np.hypot(homog[..., 0], homog[..., 1]),
-                    np.mod(np.degrees(np.arctan2(-homog[..., 0], -homog[..., 1])), 360.0))
-    elif suffix == ".csv":
-        rec = read_zephir_csv(p)
-        kind, time, heights = "zephir", rec.time, rec.heights
-        idx = _match_heights(table.heights, heights, p)
-        data = (rec.speed[:, idx], rec.direction[:, idx])
-        measured = data
+        measured = (np.asarray(horizontal_speed(homog)), np.asarray(wind_direction(homog)))
     else:
         raise ValueError(f"{p}: unknown record format {suffix!r}; expected .sta, .stdsta, .rtd "
                          "or a ZephIR .csv")
