@@ -1,0 +1,45 @@
+"""The `lidarjax` command line: one module per command, each with `register(sub)` (its
+argparse sub-parser) and `run(args)` (returns the exit code).
+
+Every command validates its inputs before computing and turns user errors into one line on
+stderr and exit code 2 (`ValueError`, `FileNotFoundError`); Ctrl-C gives one line and 130.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from . import correct, demo, simulate, table
+from ._common import enable_x64
+
+#: The command modules, in the order `--help` lists them.
+COMMANDS = (demo, simulate, table, correct)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="lidarjax",
+        description="Simulate wind lidars in CFD fields and correct their records.",
+    )
+    parser.add_argument("--x64", action=argparse.BooleanOptionalAction, default=True,
+                        help="compute in float64 (default) or float32 (--no-x64)")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for command in COMMANDS:
+        command.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    enable_x64(args)
+    try:
+        return args.func(args)
+    except (ValueError, FileNotFoundError) as err:
+        print(f"lidarjax {args.command}: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
