@@ -19,8 +19,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import default_float, split
-from .field import AbstractField
+from .._precision import default_float, split
+from ..field import AbstractField
 
 __all__ = ["Uniform", "PowerLaw", "Linear", "Hemisphere", "Hill",
            "uniform", "power_law", "linear", "hemisphere", "hill", "heading"]

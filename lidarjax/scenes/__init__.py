@@ -1,0 +1,20 @@
+"""Scenes: flows defined by formulas rather than files, usable wherever a `GridField` is.
+
+- `lidarjax.scenes.analytic`: the validation flows (uniform, power law, linear, hemisphere,
+  hill), all linear in the free stream.
+
+Every scene is an `AbstractField` (CFD frame: ``+x`` east, ``+y`` north, ``+z`` up, metres
+and m/s; directions meteorological), dynamic and differentiable in all its parameters.
+"""
+
+from .analytic import Hemisphere as Hemisphere
+from .analytic import Hill as Hill
+from .analytic import Linear as Linear
+from .analytic import PowerLaw as PowerLaw
+from .analytic import Uniform as Uniform
+from .analytic import heading as heading
+from .analytic import hemisphere as hemisphere
+from .analytic import hill as hill
+from .analytic import linear as linear
+from .analytic import power_law as power_law
+from .analytic import uniform as uniform
