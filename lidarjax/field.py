@@ -84,6 +84,28 @@ class AbstractField(eqx.Module):
         v = jnp.where(ok[..., None], v, 0.0)
         return jnp.where(ok, jnp.sum(v * directions, axis=-1), jnp.nan)
 
+    def sample_local_at(
+        self, points: Float[Array, "... 3"], time: Float[ArrayLike, ...]
+    ) -> Float[Array, "... 3"]:
+        """Velocity (m/s, CFD frame) at local points (metres, relative to `origin`) and
+        times (seconds, broadcastable to ``points.shape[:-1]``). Time-dependent fields
+        (frozen turbulence) define it; a steady field ignores `time`."""
+        del time
+        return self.sample_local(points)
+
+    def los_local_at(
+        self,
+        points: Float[Array, "... 3"],
+        directions: Float[Array, "... 3"],
+        time: Float[ArrayLike, ...],
+    ) -> Float[Array, ...]:
+        """`los_local` at times (seconds): velocity at local points and times projected on
+        unit `directions` (m/s, + along the direction); NaN as in `los_local`."""
+        v = self.sample_local_at(points, time)
+        ok = jnp.all(jnp.isfinite(v), axis=-1)
+        v = jnp.where(ok[..., None], v, 0.0)
+        return jnp.where(ok, jnp.sum(v * directions, axis=-1), jnp.nan)
+
 
 def _check_axis(name: str, values) -> np.ndarray:
     arr = np.asarray(values, dtype=np.float64)
