@@ -76,7 +76,7 @@ from .probe import AbstractProbe, PointProbe
 from .scan import Scan
 from .scenes import heading
 
-__all__ = ["Sensitivity", "Budget", "sensitivity", "uncertainty", "INPUTS", "OUTPUTS",
+__all__ = ["Sensitivity", "Budget", "sensitivity", "uncertainty", "budget_columns", "INPUTS", "OUTPUTS",
            "ANGLE_OUTPUTS"]
 
 #: Named inputs and their units (``scene.*`` paths are also accepted, unit "unit").
@@ -467,7 +467,7 @@ def sensitivity(
     mount: Mount | Sequence[Mount],
     heights: Float[ArrayLike, " h"],
     *,
-    u_ref: Float[ArrayLike, "3"] | Float[ArrayLike, "s 3"] | None = None,
+    u_ref: Float[ArrayLike, 3] | Float[ArrayLike, "s 3"] | None = None,
     probe: AbstractProbe | None = None,
     wrt: Sequence[str] = ("location", "beta", "gamma", "epsilon", "pitch", "roll",
                           "cone_angle", "heights"),
@@ -758,7 +758,7 @@ def uncertainty(
     *,
     std: Mapping[str, float | Sequence[float]],
     correlation: Mapping[tuple[str, str], float] | ArrayLike | None = None,
-    u_ref: Float[ArrayLike, "3"] | Float[ArrayLike, "s 3"] | None = None,
+    u_ref: Float[ArrayLike, 3] | Float[ArrayLike, "s 3"] | None = None,
     probe: AbstractProbe | None = None,
     outputs: Sequence[str] | None = None,
     table=None,
@@ -868,3 +868,53 @@ def uncertainty(
     return Budget(inputs, outputs, heights, jnp.asarray(std_vec, dtype),
                   jnp.asarray(corr_full, dtype), value, jac, std_out, contribution, share,
                   n_mc, mc, rel)
+
+
+# ------------------------------------------------------------------------------------------
+# Tables of results (for CSV writers)
+
+
+def budget_columns(budget: Budget, output: str, sectors: Sequence[float] | None = None,
+                   z_over_h: ArrayLike | None = None, sector_name: str = "beta"):
+    """Columns and units of one per-height output of a `Budget`, one row per sector and
+    height, for `lidarjax.io.write_table_csv`: the sector label (`sector_name`, e.g. the
+    platform rotation in degrees), ``h``, optionally ``z/H``, the nominal value, the combined
+    standard uncertainty ``u``, the Monte Carlo ``u_mc`` and ``mc_minus_lin`` (relative) when
+    present, then per input its contribution ``u_<input>`` (output unit), variance share
+    ``share_<input>`` and sensitivity coefficient ``d_<input>`` (output unit per input unit).
+
+    **Returns:** ``(columns, units)`` dicts of 1-D float arrays and unit strings."""
+    value = np.asarray(budget.value[output], dtype=np.float64)
+    if value.ndim == 1:
+        value = value[None]
+        index = lambda a: np.asarray(a, np.float64)[None]  # noqa: E731
+    elif value.ndim == 2:
+        index = lambda a: np.asarray(a, np.float64)  # noqa: E731
+    else:
+        raise ValueError(f"budget_columns: {output!r} is not a per-height output.")
+    s, h = value.shape
+    labels = np.arange(s, dtype=np.float64) if sectors is None else np.asarray(sectors, float)
+    unit = OUTPUTS[output]
+    cols = {sector_name: np.repeat(labels, h), "h": np.tile(np.asarray(budget.heights), s)}
+    units = {sector_name: "deg" if sector_name == "beta" else "1", "h": "m"}
+    if z_over_h is not None:
+        zh = np.broadcast_to(np.asarray(z_over_h, np.float64), (s, h))
+        cols["z/H"] = zh.ravel()
+        units["z/H"] = "1"
+    cols[output] = value.ravel()
+    units[output] = unit
+    cols["u"] = index(budget.std[output]).ravel()
+    units["u"] = unit
+    if output in budget.mc_std:
+        cols["u_mc"] = index(budget.mc_std[output]).ravel()
+        cols["mc_minus_lin"] = index(budget.mc_relative_difference[output]).ravel()
+        units["u_mc"], units["mc_minus_lin"] = unit, "1"
+    c = index(budget.contribution[output]).reshape(s * h, -1)
+    sh = index(budget.share[output]).reshape(s * h, -1)
+    j = index(budget.jacobian[output]).reshape(s * h, -1)
+    for i, name in enumerate(budget.inputs):
+        in_unit = budget.input_units[i]
+        cols[f"u_{name}"], units[f"u_{name}"] = c[:, i], unit
+        cols[f"share_{name}"], units[f"share_{name}"] = sh[:, i], "1"
+        cols[f"d_{name}"], units[f"d_{name}"] = j[:, i], f"{unit} per {in_unit}"
+    return cols, units

@@ -116,27 +116,6 @@ def test_uniform_flow_closed_forms():
     np.testing.assert_allclose(j["cff_U"][:, col["speed"]], 0.0, atol=1e-12)
 
 
-def test_batch_equals_single_sectors_and_gridfield_speed():
-    scene = lj.scenes.hemisphere(20.0, 10.0, 250.0)
-    x = np.arange(-40.0, 44.0, 4.0)
-    grid = lj.GridField.from_function(scene.sample, x, x, np.arange(0.0, 84.0, 4.0))
-    mounts = [lj.Mount([4.0, 3.0, 20.3], beta=b, psi=180.0, pitch=0.5) for b in (0.0, 90.0)]
-    u_ref = 10.0 * np.asarray(lj.scenes.heading(250.0))
-    h = np.array([8.0, 30.0])
-    wrt = ("location", "beta", "pitch", "speed")
-    batch = sensitivity([grid, grid], lj.windcube_v2(), mounts, h, u_ref=u_ref, wrt=wrt)
-    assert batch.jacobian["cff_U"].shape == (2, 2, 6)
-    for k, m in enumerate(mounts):
-        one = sensitivity(grid, lj.windcube_v2(), m, h, u_ref=u_ref, wrt=wrt)
-        for o in batch.outputs:
-            np.testing.assert_allclose(batch.jacobian[o][k], one.jacobian[o], rtol=1e-10,
-                                       atol=1e-13)
-    # Reynolds scaling of a grid: lidar speed is proportional to the free stream; cff_U fixed
-    j = np.asarray(batch.jacobian["lidar_speed"])[..., 5]
-    np.testing.assert_allclose(j, np.asarray(batch.value["lidar_speed"]) / 10.0, rtol=1e-12)
-    np.testing.assert_allclose(np.asarray(batch.jacobian["cff_U"])[..., 5], 0.0, atol=1e-12)
-
-
 def test_bad_inputs_raise_before_compiling():
     scene, scan, mount, u_ref = _config()
     grid = lj.GridField.from_function(scene.sample, *(np.arange(0.0, 50.0, 10.0),) * 3)

@@ -77,7 +77,7 @@ def test_points_and_los_in_a_linear_field(case, name):
     v0 = np.array([6.0, -3.0, 0.5])
     grad = RNG.normal(size=(3, 3)) * 0.02
     scene = lj.scenes.linear(v0, grad, point=(1.0, 2.0, 3.0))
-    sim = lj.simulate(scene, scan, _mount(c), HEIGHTS)
+    sim = lj.simulate(scene, scan, _mount(c), HEIGHTS, u_ref=v0)  # shares the compilation
     n, pts = geometry(c["loc"], c["beta"], c["gamma"], c["psi"], c["pitch"], c["roll"],
                       np.asarray(scan.azimuths), float(scan.cone_angle), scan.vertical, HEIGHTS)
     np.testing.assert_allclose(np.asarray(sim.directions), n, atol=1e-13)
