@@ -271,7 +271,7 @@ def _one(field, scan, mount, heights, u_ref, probe, delta, cfg):
     return _outputs_of(sim, outputs)
 
 
-def _jacobian_one(field, scan, mount, heights, u_ref, probe, cfg):
+def _jacobian_one(field, scan, mount, heights, u_ref, probe, cfg, hessian=False):
     dtype = field.dtype
     delta0 = jnp.zeros((len(cfg[0]),), dtype)
 
@@ -279,8 +279,16 @@ def _jacobian_one(field, scan, mount, heights, u_ref, probe, cfg):
         out = _one(field, scan, mount, heights, u_ref, probe, delta, cfg)
         return out, out
 
-    jac, value = jax.jacfwd(f, has_aux=True)(delta0)
-    return value, jac
+    if not hessian:
+        jac, value = jax.jacfwd(f, has_aux=True)(delta0)
+        return value, jac
+
+    def g(delta):  # forward over forward: the p x p second derivatives
+        j, v = jax.jacfwd(f, has_aux=True)(delta)
+        return j, (j, v)
+
+    hess, (jac, value) = jax.jacfwd(g, has_aux=True)(delta0)
+    return value, jac, hess
 
 
 def _map_sectors(fn, field, mount, u_ref, axes):
@@ -521,7 +529,10 @@ class Budget(eqx.Module):
       distributed LOS errors of each beam) whose column in ``jacobian[inv_*]`` is the
       root-sum-square over the beams of d out / d LOS_b (zero for the forward outputs).
     - `std_in`: ``(p,)`` the inputs' standard uncertainties; `correlation` ``(p, p)``.
-    - `std[out]`: combined standard uncertainty ``sqrt(J C J^T)``, ``value[out].shape``.
+    - `std[out]`: combined standard uncertainty ``sqrt(J C J^T)`` (plus the second-order
+      term with ``second_order=True``), ``value[out].shape``; `std_linear[out]` the first-order
+      part; `second_order[out]` the second-order part ``sqrt(tr((H C)^2) / 2)`` (empty dict
+      without it).
     - `contribution[out]`: ``(..., p)`` each input's ``|dout/dx_i| u(x_i)`` (GUM's
       ``u_i(y)``), in the output's unit.
     - `share[out]`: ``(..., p)`` each input's part of the variance, ``J_i (C J^T)_i / u^2``
@@ -540,6 +551,8 @@ class Budget(eqx.Module):
     value: dict
     jacobian: dict
     std: dict
+    std_linear: dict
+    second_order: dict
     contribution: dict
     share: dict
     n_monte_carlo: int = eqx.field(static=True)
@@ -560,9 +573,11 @@ class Budget(eqx.Module):
             arrays = [np.asarray(self.value[o]), np.asarray(self.std[o]),
                       np.asarray(self.contribution[o])]
             mc = np.asarray(self.mc_std[o]) if o in self.mc_std else None
+            so = np.asarray(self.second_order[o]) if o in self.second_order else None
             if arrays[0].ndim == 2:
                 arrays = [a[sector or 0] for a in arrays]
                 mc = None if mc is None else mc[sector or 0]
+                so = None if so is None else so[sector or 0]
             v, u, c = arrays
             if v.ndim != 1:
                 raise ValueError(f"Budget.table: {o!r} is not per height; read .std.")
@@ -570,10 +585,13 @@ class Budget(eqx.Module):
             lines.append(f"{o} [{unit}]: standard uncertainty and contributions |c_i| u_i")
             head = f"{'h (m)':>8s} {'value':>10s} {'u':>10s} " + " ".join(
                 f"{n:>10s}" for n in self.inputs)
-            lines.append(head + (f" {'u (MC)':>10s} {'MC/lin-1':>9s}" if mc is not None else ""))
+            head += f" {'2nd order':>10s}" if so is not None else ""
+            lines.append(head + (f" {'u (MC)':>10s} {'MC/u-1':>9s}" if mc is not None else ""))
             for k, h in enumerate(np.asarray(self.heights)):
                 row = f"{h:8.2f} {v[k]:10.4f} {u[k]:10.3e} " + " ".join(
                     f"{x:10.3e}" for x in c[k])
+                if so is not None:
+                    row += f" {so[k]:10.3e}"
                 if mc is not None:
                     row += f" {mc[k]:10.3e} {mc[k] / u[k] - 1:+9.2%}" if u[k] > 0 else ""
                 lines.append(row)
@@ -663,17 +681,22 @@ def _inverse_fn(table):
 @eqx.filter_jit
 def _uncertainty_core(field, scan, mount, heights, u_ref, probe, cfg, axes, chol, std_in,
                       cov, key, table, noise, n_mc, chunk):
-    names, outputs, infer, point_reference, ratio_tol = cfg
+    names, outputs, infer, point_reference, ratio_tol, second_order = cfg
     fwd_outputs = tuple(o for o in outputs if o not in _INVERSE_OUTPUTS)
     inv_outputs = tuple(o for o in outputs if o in _INVERSE_OUTPUTS)
     need_los = bool(inv_outputs)
     run_outputs = fwd_outputs + (("los",) if need_los and "los" not in fwd_outputs else ())
     fcfg = (names, run_outputs, infer, point_reference, ratio_tol)
+
     dtype = field.dtype
     p = len(names)
 
     def per_sector(f, m, u, k):
-        value, jac = _jacobian_one(f, scan, m, heights, u, probe, fcfg)
+        if second_order:
+            value, jac, hess = _jacobian_one(f, scan, m, heights, u, probe, fcfg, True)
+            value["_hess"] = hess
+        else:
+            value, jac = _jacobian_one(f, scan, m, heights, u, probe, fcfg)
         if need_los:
             inv = _inverse_fn(table)
             los = value["los"]
@@ -723,6 +746,7 @@ def _uncertainty_core(field, scan, mount, heights, u_ref, probe, cfg, axes, chol
         batched = field.velocity if grid else field
         value, jac, mc = jax.vmap(one, in_axes=(field_axis, mount_axis, uref_axis, 0))(
             batched, mount, u_ref, keys)
+    hess = value.pop("_hess", None)
     if need_los and "los" not in outputs:
         value.pop("los")
         jac.pop("los")
@@ -738,7 +762,14 @@ def _uncertainty_core(field, scan, mount, heights, u_ref, probe, cfg, axes, chol
             j = jnp.concatenate([j, jnp.zeros(j.shape[:-1] + (1,), j.dtype)], axis=-1)
         jac[o] = j
         std[o], contribution[o], share[o] = _budget(j, cov, std_in)
-    return value, jac, std, contribution, share, mc
+    second = {}
+    if hess is not None:  # Gaussian inputs: var(J d + d^T H d / 2) = J C J^T + tr((H C)^2) / 2
+        c = cov[:p, :p]
+        for o in fwd_outputs:
+            hc = jnp.einsum("...ij,jk->...ik", jnp.where(jnp.isfinite(hess[o]), hess[o], 0.0), c)
+            var2 = 0.5 * jnp.einsum("...ij,...ji->...", hc, hc)
+            second[o] = jnp.sqrt(jnp.maximum(var2, 0.0))
+    return value, jac, std, contribution, share, mc, second
 
 
 def _sector_count(field, mount, u_ref, axes):
@@ -766,6 +797,7 @@ def uncertainty(
     n_monte_carlo: int = 0,
     key: jax.Array | int | None = None,
     mc_batch_size: int = 256,
+    second_order: bool = False,
     ratio_tol: float = DEFAULT_RATIO_TOL,
 ) -> Budget:
     """Per-height uncertainty budgets of lidar outputs (GUM), optionally checked by Monte Carlo.
@@ -794,6 +826,12 @@ def uncertainty(
       relative standard error of a Monte Carlo standard deviation is about
       ``1 / sqrt(2 (n - 1))``: 1 % needs about 5000 samples.
     - `key`: a `jax.random` key or integer seed for the Monte Carlo (default 0).
+    - `second_order`: also propagate the second derivatives (forward over forward, ``p^2``
+      directions): for Gaussian inputs the variance of ``J d + d^T H d / 2`` is
+      ``J C J^T + tr((H C)^2) / 2``. Needed where an output is stationary in an input (a
+      level lidar's speed in its tilt: the cosine error) and the first-order budget is
+      small; `Budget.std` then includes the term (`Budget.second_order`), `Budget.std_linear`
+      is the first-order one. Forward outputs only (the inverse outputs stay first order).
 
     **Method.** The Jacobian ``J = d out / d x`` (`sensitivity`, forward mode) and the
     covariance ``C = diag(u) R diag(u)`` of the inputs give the combined standard
@@ -833,6 +871,9 @@ def uncertainty(
      _) = _prepare(fname, field, scan, mount, heights, u_ref, probe, names, outputs,
                    inverse=table is not None)
     inverse = any(o in _INVERSE_OUTPUTS for o in outputs)
+    if second_order and inverse:
+        raise ValueError(f"{fname}: second_order=True is for the forward outputs; leave the "
+                         f"inverse outputs (inv_speed, inv_direction) out or use first order.")
     if table is not None:
         want = (heights.shape[0], scan.n_beams)
         if (table.n_heights, table.n_beams) != want:
@@ -855,8 +896,8 @@ def uncertainty(
     # a symmetric square root (works for semi-definite C: zero std or rho = +-1)
     w, v = np.linalg.eigh(cov)
     chol = (v * np.sqrt(np.clip(w, 0.0, None))) @ v.T
-    cfg = (names, outputs, infer, point_reference, float(ratio_tol))
-    value, jac, std_out, contribution, share, mc = _uncertainty_core(
+    cfg = (names, outputs, infer, point_reference, float(ratio_tol), bool(second_order))
+    value, jac, std_lin, contribution, share, mc, second = _uncertainty_core(
         field, scan, mount, heights, u_ref, probe, cfg, axes, jnp.asarray(chol, dtype),
         jnp.asarray(std_in, dtype), jnp.asarray(cov, dtype), key, table,
         jnp.asarray(noise_f, dtype), n_mc, min(int(mc_batch_size), max(n_mc, 1)))
@@ -864,10 +905,12 @@ def uncertainty(
     std_vec = np.concatenate([std_in, [noise_f]]) if inverse else std_in
     corr_full = np.eye(len(inputs))
     corr_full[: len(names), : len(names)] = corr
+    std_out = {o: jnp.sqrt(std_lin[o] ** 2 + second[o] ** 2) if o in second else std_lin[o]
+               for o in outputs}
     rel = {o: mc[o] / std_out[o] - 1.0 for o in mc}
     return Budget(inputs, outputs, heights, jnp.asarray(std_vec, dtype),
-                  jnp.asarray(corr_full, dtype), value, jac, std_out, contribution, share,
-                  n_mc, mc, rel)
+                  jnp.asarray(corr_full, dtype), value, jac, std_out, std_lin, second,
+                  contribution, share, n_mc, mc, rel)
 
 
 # ------------------------------------------------------------------------------------------
@@ -905,6 +948,10 @@ def budget_columns(budget: Budget, output: str, sectors: Sequence[float] | None 
     units[output] = unit
     cols["u"] = index(budget.std[output]).ravel()
     units["u"] = unit
+    if output in budget.second_order:
+        cols["u_linear"] = index(budget.std_linear[output]).ravel()
+        cols["u_second_order"] = index(budget.second_order[output]).ravel()
+        units["u_linear"] = units["u_second_order"] = unit
     if output in budget.mc_std:
         cols["u_mc"] = index(budget.mc_std[output]).ravel()
         cols["mc_minus_lin"] = index(budget.mc_relative_difference[output]).ravel()

@@ -179,16 +179,27 @@ def test_budget_agrees_with_monte_carlo(budget):
     assert "u (MC)" in budget.table("lidar_speed")
 
 
-def test_monte_carlo_is_the_spread_of_simulate():
-    """The Monte Carlo reproduces an explicit loop over `simulate` with the same samples'
-    statistics: a sampled epsilon gives exactly its own spread in the reported direction."""
-    scene = lj.scenes.uniform(8.0, 359.9)  # the direction straddles north: wrapped deviations
-    b = uncertainty(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 0.0]), HEIGHTS[:1],
-                    std={"epsilon": 2.0}, n_monte_carlo=3000, key=0)
-    z = jax.random.normal(jax.random.split(jax.random.PRNGKey(0), 2)[0], (3000, 1))
-    want = np.std(2.0 * np.asarray(z[:, 0]), ddof=1)
-    np.testing.assert_allclose(np.asarray(b.mc_std["lidar_direction"]), want, rtol=1e-10)
-    np.testing.assert_allclose(np.asarray(b.std["lidar_direction"]), 2.0, rtol=1e-12)
+def test_second_order_budget_of_a_tilted_lidar_matches_monte_carlo():
+    """A nearly level lidar's speed is stationary in its tilt (the cosine error): the first
+    order misses most of it, the second-order term tr((H C)^2)/2 restores it. The sampled
+    north offset gives exactly its own spread in the direction (wrapped across north)."""
+    scene = lj.scenes.uniform(10.0, 359.9)
+    b = uncertainty(scene, lj.windcube_v2(), lj.Mount([0.0, 0.0, 0.0], pitch=0.379, roll=0.262),
+                    HEIGHTS[:1], std={"epsilon": 2.0, "pitch": 1.0, "roll": 1.0},
+                    outputs=("lidar_speed", "lidar_direction"), n_monte_carlo=5000, key=0,
+                    second_order=True)
+    u, lin, so = (np.asarray(x["lidar_speed"])[0] for x in (b.std, b.std_linear, b.second_order))
+    assert so > 1.5 * lin  # the cosine error dominates
+    # closed form: the body-frame horizontal speed is U (1 - (r^2 x^2 + p^2 y^2 - 2 x y p r)/2)
+    # (x, y the wind's unit components), so tr((H C)^2) / 2 = U^2 s^4 / 2 for tilt std s
+    s = np.radians(1.0)
+    np.testing.assert_allclose(so, 10.0 * s**2 / np.sqrt(2.0), rtol=1e-3)  # p0, r0 != 0
+    np.testing.assert_allclose(u, np.sqrt(lin**2 + so**2), rtol=1e-12)
+    assert abs(float(b.mc_relative_difference["lidar_speed"][0])) < 0.05
+    z = jax.random.normal(jax.random.split(jax.random.PRNGKey(0), 2)[0], (5000, 3))
+    want = np.std(2.0 * np.asarray(z[:, 0]), ddof=1)  # epsilon is the first input
+    np.testing.assert_allclose(np.asarray(b.mc_std["lidar_direction"]), want, rtol=2e-3)
+    assert "2nd order" in b.table("lidar_speed")
 
 
 # ------------------------------------------------------------------------------------------
