@@ -157,7 +157,14 @@ def median_time(fn, repeats):
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--replot", action="store_true", help="redraw the figure and table "
+                        "from the saved JSON")
     args = parser.parse_args()
+    if args.replot:
+        rows = json.loads((RESULTS / "sensitivity.json").read_text())["sites"]
+        write_md(rows, RESULTS / "sensitivity.md")
+        plot(rows, RESULTS / "sensitivity.png")
+        return
     n_loop = 500 if args.quick else N_MC
     n_ref = 4000 if args.quick else 20000
     rows = {}
@@ -295,6 +302,7 @@ def plot(rows, path):
         ax.text(i, rows[n]["time_loop_5000_s"] * 1.3, f"{rows[n]['speedup_vs_loop']:,.0f}x",
                 ha="center", fontsize=9)
     ax.set_yscale("log")
+    ax.set_ylim(top=max(rows[n]["time_loop_5000_s"] for n in names) * 10)
     ax.set_xticks(x)
     ax.set_xticklabels(names)
     ax.set_ylabel("time (s)")
@@ -311,6 +319,7 @@ def plot(rows, path):
         ax.plot(r["outputs"]["lidar_speed"]["u_budget"], zh, "k-", lw=2, label="combined (gradients)")
         ax.plot(r["outputs"]["lidar_speed"]["u_mc_lidarjax"], zh, "k--", lw=1, label="Monte Carlo")
         ax.set_xscale("log")
+        ax.set_xlim(left=float(np.max(r["outputs"]["lidar_speed"]["u_budget"])) * 1e-4)
         ax.set_xlabel("contribution to u(lidar speed) (m/s)")
         ax.set_ylabel("z / H")
         ax.set_title(f"{name}: terms of the speed budget")

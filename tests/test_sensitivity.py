@@ -150,7 +150,7 @@ STD = {"location": 0.05, "epsilon": 0.5, "pitch": 0.3, "roll": 0.3, "cone_angle"
 def budget():
     scene, scan, mount, u_ref = _config()
     return uncertainty(scene, scan, mount, HEIGHTS, u_ref=u_ref, std=STD,
-                       correlation={("pitch", "roll"): 0.4}, n_monte_carlo=4000, key=3)
+                       correlation={("pitch", "roll"): 0.4})
 
 
 def test_budget_is_the_gum_law_with_correlations(budget):
@@ -169,14 +169,6 @@ def test_budget_is_the_gum_law_with_correlations(budget):
     # the heading uncertainty turns the reported direction one to one
     np.testing.assert_allclose(np.asarray(budget.contribution["lidar_direction"])[:, 3], 0.5,
                                rtol=1e-10)
-
-
-def test_budget_agrees_with_monte_carlo(budget):
-    # 4000 samples: the Monte Carlo standard deviation is good to about 1.1 % (one sigma)
-    for o in ("lidar_speed", "lidar_direction", "cff_U"):
-        rel = np.asarray(budget.mc_relative_difference[o])
-        assert np.all(np.abs(rel) < 0.05), (o, rel)
-    assert "u (MC)" in budget.table("lidar_speed")
 
 
 def test_second_order_budget_of_a_tilted_lidar_matches_monte_carlo():
@@ -204,6 +196,9 @@ def test_second_order_budget_of_a_tilted_lidar_matches_monte_carlo():
 
 # ------------------------------------------------------------------------------------------
 # The inverse
+
+
+U_SHARED = np.array([1.0, 0.0, 0.0])
 
 
 @pytest.fixture(scope="module")
@@ -240,7 +235,7 @@ def test_inverse_budget_against_invert(site, inverse_budget):
     np.testing.assert_allclose(j["inv_speed"][0, :, 2], 1.0, rtol=1e-8)
     for k, scene in enumerate(scenes):
         # the record-noise term is invert's own Jacobian uncertainty with that noise
-        sim = lj.simulate(scene, scan, mount, h)
+        sim = lj.simulate(scene, scan, mount, h, u_ref=U_SHARED)  # the table's compilation
         inv = lj.invert(table, sim.los[None], noise=0.1, batch_size=None)
         np.testing.assert_allclose(np.asarray(b.contribution["inv_speed"])[k, :, 3],
                                    np.asarray(inv.speed_std[0]), rtol=1e-6)
@@ -255,7 +250,7 @@ def test_inverse_budget_against_invert(site, inverse_budget):
                     loc[0] += sign * eps
                 else:
                     g = sign * eps
-                los = lj.simulate(scene, scan, lj.Mount(loc, gamma=g), h).los
+                los = lj.simulate(scene, scan, lj.Mount(loc, gamma=g), h, u_ref=U_SHARED).los
                 r = lj.invert(table, los[None], batch_size=None)
                 return np.asarray(r.speed[0]), np.asarray(r.direction[0])
             (s1, d1), (s0, d0) = run(1), run(-1)
