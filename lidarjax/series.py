@@ -43,7 +43,14 @@ from ._precision import difference
 from .angles import horizontal_speed, wind_direction
 from .field import AbstractField
 from .forward import _beam_los, _validate
-from .frames import cfd_to_north_rotation, lidar_to_cfd_rotation, lidar_to_north_rotation, rotate
+from .frames import (
+    body_to_cfd_rotation,
+    cfd_to_north_rotation,
+    lidar_to_cfd_rotation,
+    lidar_to_north_rotation,
+    rotate,
+    tilt_rotation,
+)
 from .motion import AbstractMotion
 from .mount import Mount
 from .probe import AbstractProbe, PointProbe
@@ -114,7 +121,13 @@ def _check_span(times, schedule: Schedule, n_heights: int):
     except (TypeError, ValueError):
         raise ValueError("simulate_series: `times` must be (start, duration) in seconds, e.g. "
                          "(0.0, 600.0).") from None
-    cycle = float(np.asarray(schedule.cycle_time(n_heights)))
+    try:
+        period, refocus = float(np.asarray(schedule.period)), float(np.asarray(schedule.refocus))
+    except jax.errors.TracerArrayConversionError:
+        raise ValueError("simulate_series: the schedule's period must be concrete (it sets the "
+                         "number of LOS); build the Schedule outside jit.") from None
+    cycle = (n_heights * (schedule.rotations_per_height * period + refocus)
+             if schedule.heights_sequential else period)
     n = int(np.floor(duration / cycle + 1e-9))
     if not np.isfinite(start) or not np.isfinite(duration) or n < 1:
         raise ValueError(f"simulate_series: the span (start={start}, duration={duration} s) must "
@@ -210,24 +223,25 @@ def _los_times(schedule: Schedule, start, n_cycles: int, n_heights: int, dtype):
 def _mount_at(mount: Mount, attitude):
     """The mount turned by a motion's attitude ``(pitch, roll, yaw)`` in degrees."""
     pitch, roll, yaw = attitude[0], attitude[1], attitude[2]
-    has_tilt = hasattr(mount, "pitch")
-    if has_tilt:
-        return eqx.tree_at(lambda m: (m.gamma, m.pitch, m.roll), mount,
-                           (mount.gamma + yaw, mount.pitch + pitch, mount.roll + roll))
-    return eqx.tree_at(lambda m: m.gamma, mount, mount.gamma + yaw + 0 * (pitch + roll))
+    return eqx.tree_at(lambda m: (m.gamma, m.pitch, m.roll), mount,
+                       (mount.gamma + yaw, mount.pitch + pitch, mount.roll + roll))
 
 
 def _geometry(scan: Scan, mount: Mount):
-    """Beam unit vectors ``(b, 3)`` in the CFD frame and the range per metre of height
-    ``(b,)`` for a mount (the forward model's chain)."""
-    n_lidar = scan.directions()
-    n_cfd = rotate(lidar_to_cfd_rotation(mount), n_lidar)
-    return n_cfd, 1.0 / n_lidar[:, 2]
+    """Beam unit vectors ``(b, 3)`` in the CFD frame (tilt included) and the focus range per
+    metre of height ``(b,)`` (``1 / cos(cone)`` in the body frame: the instrument assumes it is
+    level), as in `lidarjax.simulate`."""
+    n_body = scan.directions()
+    return rotate(body_to_cfd_rotation(mount), n_body), 1.0 / n_body[:, 2]
 
 
 def _to_north(scan: Scan, mount: Mount, v_lidar):
-    """Lidar-frame reconstruction to the north frame (the instrument's software rotation)."""
-    return rotate(lidar_to_north_rotation(mount), v_lidar)
+    """Body-frame reconstruction to the north frame: the software north rotation, after the
+    tilt when the scan compensates it (as `lidarjax.simulate`)."""
+    to_north = lidar_to_north_rotation(mount)
+    if scan.tilt_compensation:
+        to_north = to_north @ tilt_rotation(mount.pitch, mount.roll)
+    return rotate(to_north, v_lidar)
 
 
 def _series(field, scan, mount, heights, start, schedule, probe, motion, point_dt, *,
@@ -258,7 +272,8 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
         n_cfd, per_height = _geometry(scan, mt)
         n = n_cfd[j]
         rng = (z * per_height[j]).reshape(1, 1)
-        los, _ = _beam_los(_AtTime(field.origin, field.origin_lo, field, t), origin_local + offset, n[None, :], rng, probe)
+        frozen = _AtTime(field.origin, field.origin_lo, field, t)
+        los, _ = _beam_los(frozen, origin_local + offset, n[None, :], rng, probe)
         return los[0, 0] - jnp.dot(n, v_lidar)
 
     los = jax.vmap(one)(t_los.reshape(-1), beam.reshape(-1), hgt.reshape(-1)).reshape(m, h, b)
@@ -360,13 +375,19 @@ def statistics(series: Series, starts: Float[ArrayLike, " r"] | None = None,
 
     A record holds the reconstructions (and point samples) whose time lies in
     ``[start, start + record_length)``. Without `starts`, the whole series is one record.
-    Pure and jit-compatible (`starts` may be traced; shapes follow its length).
+    Pure and jit-compiled (`starts` and `record_length` are dynamic; shapes follow the
+    number of records).
     """
     dtype = series.velocity.dtype
     if starts is None:
         starts = series.start[None]
         record_length = series.duration + 1e-6
     starts = jnp.atleast_1d(jnp.asarray(starts, dtype))
+    return _statistics_jit(series, starts, jnp.asarray(record_length, dtype))
+
+
+def _statistics(series: Series, starts, record_length) -> SeriesStatistics:
+    dtype = series.velocity.dtype
 
     def one(s):
         t = series.time  # (n, h)
@@ -407,6 +428,9 @@ def statistics(series: Series, starts: Float[ArrayLike, " r"] | None = None,
             sonic_w=sw, sonic_w_std=sw_std)
 
     return jax.vmap(one)(starts)
+
+
+_statistics_jit = jax.jit(_statistics)
 
 
 def simulate_statistics(
@@ -492,7 +516,7 @@ def _record_stats_fn(n_cycles, n_points, order, record_length, ensemble):
         series = _series(field, scan, mount, heights, start, schedule, probe, motion, point_dt,
                          n_cycles=n_cycles, n_points=n_points, order=order,
                          duration=record_length)
-        st = statistics(series, start[None], record_length)
+        st = _statistics(series, start[None], jnp.asarray(record_length, heights.dtype))
         return jax.tree_util.tree_map(lambda a: a[0], st)
 
     over_records = jax.vmap(one_record, in_axes=(None, None, None, None, 0, None, None, None, None))
