@@ -45,5 +45,10 @@ from .sta import read_sta as read_sta
 from .sta import write_sta as write_sta
 from .tables import load_table as load_table
 from .tables import save_table as save_table
+from .turbulence import TurbSimField as TurbSimField
+from .turbulence import read_hawc2_box as read_hawc2_box
+from .turbulence import read_turbsim as read_turbsim
+from .turbulence import write_hawc2_box as write_hawc2_box
+from .turbulence import write_turbsim as write_turbsim
 from .zephir import ZephirRecord as ZephirRecord
 from .zephir import read_zephir_csv as read_zephir_csv

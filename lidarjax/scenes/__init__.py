@@ -18,3 +18,7 @@ from .analytic import hill as hill
 from .analytic import linear as linear
 from .analytic import power_law as power_law
 from .analytic import uniform as uniform
+from .turbulence import FrozenTurbulence as FrozenTurbulence
+from .turbulence import TurbulenceBox as TurbulenceBox
+from .turbulence import frozen_turbulence as frozen_turbulence
+from .turbulence import mann_box as mann_box
