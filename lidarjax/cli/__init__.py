@@ -10,11 +10,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import correct, demo, simulate, table
+from . import correct, demo, series, simulate, table
 from ._common import enable_x64
 
 #: The command modules, in the order `--help` lists them.
-COMMANDS = (demo, simulate, table, correct)
+COMMANDS = (demo, simulate, table, correct, series)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -19,6 +19,7 @@ from .fields import read_fluent_points as read_fluent_points
 from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
+from .motion import read_motion_csv as read_motion_csv
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord
