@@ -45,3 +45,4 @@ try:
     __version__ = importlib.metadata.version("lidarjax")
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
+from . import spectral as spectral
