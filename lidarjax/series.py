@@ -99,19 +99,25 @@ class Series(eqx.Module):
 
 
 class _AtTime(AbstractField):
-    """A field frozen at one time: lets the forward model's probe quadrature sample a
-    time-dependent field unchanged."""
+    """A field frozen at given times: lets the forward model's probe quadrature
+    (`lidarjax.forward._beam_los`) sample a time-dependent field unchanged. `time` is a
+    scalar or one time per beam focus ``(h, b)``; the quadrature's extra node axis (points
+    ``(h, b, q, 3)``) shares its focus' time."""
 
     origin: Float[Array, 3]
     origin_lo: Float[Array, 3]
     field: AbstractField
-    time: Float[Array, ""]
+    time: Float[Array, "..."]
+
+    def _time(self, points):
+        t = self.time
+        return t if t.ndim >= points.ndim - 1 else t[..., None]
 
     def sample_local(self, points):
-        return self.field.sample_local_at(points, self.time)
+        return self.field.sample_local_at(points, self._time(points))
 
     def los_local(self, points, directions):
-        return self.field.los_local_at(points, directions, self.time)
+        return self.field.los_local_at(points, directions, self._time(points))
 
 
 def _check_span(times, schedule: Schedule, n_heights: int):
@@ -260,15 +266,11 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
     to_cfd_rest = lidar_to_cfd_rotation(mount_d)
 
     def one(t, j, z):
-        if motion is None:
-            mt = mount_d
-            offset = jnp.zeros(3, dtype)
-            v_lidar = jnp.zeros(3, dtype)
-        else:
-            off, vel, att = motion.state(t)
-            mt = _mount_at(mount_d, att.astype(dtype))
-            offset = rotate(to_cfd_rest, off.astype(dtype))
-            v_lidar = rotate(to_cfd_rest, vel.astype(dtype))
+        """One LOS of a moving lidar: its own mount, position and velocity at time t."""
+        off, vel, att = motion.state(t)
+        mt = _mount_at(mount_d, att.astype(dtype))
+        offset = rotate(to_cfd_rest, off.astype(dtype))
+        v_lidar = rotate(to_cfd_rest, vel.astype(dtype))
         n_cfd, per_height = _geometry(scan, mt)
         n = n_cfd[j]
         rng = (z * per_height[j]).reshape(1, 1)
@@ -276,7 +278,18 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
         los, _ = _beam_los(frozen, origin_local + offset, n[None, :], rng, probe)
         return los[0, 0] - jnp.dot(n, v_lidar)
 
-    los = jax.vmap(one)(t_los.reshape(-1), beam.reshape(-1), hgt.reshape(-1)).reshape(m, h, b)
+    if motion is None:
+        # a fixed lidar: one geometry, every cycle's (h, b) LOS at their own times at once
+        n_cfd, per_height = _geometry(scan, mount_d)
+        ranges = heights[:, None] * per_height[None, :]
+
+        def cycle(t_hb):
+            frozen = _AtTime(field.origin, field.origin_lo, field, t_hb)
+            return _beam_los(frozen, origin_local, n_cfd, ranges, probe)[0]
+
+        los = jax.vmap(cycle)(t_los)
+    else:
+        los = jax.vmap(one)(t_los.reshape(-1), beam.reshape(-1), hgt.reshape(-1)).reshape(m, h, b)
 
     # reconstructions, as the instrument builds them
     if schedule.update == "each_los":

@@ -224,13 +224,23 @@ def test_surging_lidar_adds_its_velocity_variance():
     st = statistics(s)
     np.testing.assert_allclose(st.speed[0], U, rtol=1e-12)
     np.testing.assert_allclose(st.speed_std[0], amp * 2 * np.pi / period / np.sqrt(2), rtol=1e-10)
-    # a logged (sampled) version of the same motion gives nearly the same statistics
-    tt = np.arange(-5.0, 610.0, 0.05)
-    logged = SampledMotion(tt, offset=np.stack([0 * tt, amp * np.sin(2 * np.pi * tt / period),
-                                                0 * tt], -1))
-    st2 = statistics(simulate_series(field, scan, MOUNT, HEIGHTS, (0.0, 600.0), schedule=sched,
-                                     motion=logged))
-    np.testing.assert_allclose(st2.speed_std[0], st.speed_std[0], rtol=2e-3)
+
+
+def test_sampled_motion_interpolates_a_log():
+    """A logged sinusoid, linearly interpolated, gives the sinusoid's state (to the
+    interpolation error), its velocity by central differences, and NaN outside the log."""
+    amp, period = 2.0, 8.0
+    exact = SinusoidalMotion.of(surge=(amp, period), pitch=(3.0, 5.0))
+    tt = np.arange(0.0, 60.0, 0.02)
+    state = jax.jit(lambda motion, t: motion.state(t))
+    off, vel, att = (np.asarray(a) for a in state(exact, tt))
+    logged = SampledMotion(tt, off, att)
+    t = np.linspace(1.0, 50.0, 777)
+    for a, b, tol in zip(state(logged, t), state(exact, t), (1e-3, 4e-3, 2e-3), strict=True):
+        np.testing.assert_allclose(a, b, atol=tol)
+    assert np.all(np.isnan(np.asarray(state(logged, np.array([-1.0, 61.0]))[0])))
+    with pytest.raises(ValueError, match="increasing"):
+        SampledMotion([0.0, 0.0, 1.0])
 
 
 def test_gradient_of_statistics_matches_finite_difference():
@@ -266,8 +276,8 @@ def test_streamed_statistics_match_series_in_chunks():
 
 
 def test_sharded_over_forced_host_devices():
-    """Two forced CPU devices: each chunk's records are sharded over a 1-D mesh and the
-    result equals the single-device one (run in a subprocess: XLA_FLAGS must be set before
+    """Two forced CPU devices: each chunk's records (3, padded to 4) are sharded over a 1-D
+    mesh and give the closed-form result (run in a subprocess: XLA_FLAGS must be set before
     JAX initialises)."""
     code = textwrap.dedent("""
         import jax, numpy as np
@@ -278,11 +288,11 @@ def test_sharded_over_forced_host_devices():
         f = lidarjax.scenes.power_law(10.0, 100.0, 0.2, 270.0)
         m = lidarjax.Mount([0.0, 0.0, 0.0])
         st = simulate_statistics(f, lidarjax.windcube_v2(), m, [50.0, 100.0],
-                                 np.arange(3) * 600.0, chunk=3)
-        st1 = simulate_statistics(f, lidarjax.windcube_v2(), m, [50.0, 100.0],
-                                  np.arange(3) * 600.0, chunk=3, shard=False)
-        np.testing.assert_allclose(st.speed, st1.speed, rtol=1e-12)
-        np.testing.assert_allclose(st.speed[:, 1], 10.0, rtol=1e-9)
+                                 np.arange(3) * 600.0, chunk=3, record_length=60.0)
+        # a steady power law: every record reports the profile, no dispersion
+        np.testing.assert_allclose(st.speed, np.broadcast_to([10.0 * 0.5**0.2, 10.0], (3, 2)),
+                                   rtol=1e-9)
+        np.testing.assert_allclose(st.speed_std, 0.0, atol=1e-9)
         print("OK", st.speed.shape)
     """)
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",
