@@ -107,7 +107,7 @@ class _AtTime(AbstractField):
     origin: Float[Array, 3]
     origin_lo: Float[Array, 3]
     field: AbstractField
-    time: Float[Array, "..."]
+    time: Float[Array, ...]
 
     def _time(self, points):
         t = self.time
