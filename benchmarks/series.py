@@ -12,11 +12,12 @@ axis), the sliding Windcube reconstruction after every LOS from the latest 5, th
 reported). lidarjax streams chunks of records through `simulate_statistics` (jit, vmap);
 numpy loops over records (each record vectorised over all its LOS and nodes).
 
-Accuracy: an ensemble of boxes drawn with the exact spectrum gives per-height mean
-``(TI_lidar / TI_point)^2`` (speed dispersion over the cup's), compared with
-`lidarjax.spectral.lidar_variance` for the same box, probe, beam times and records (the
-spectral model predicts the variance of the reconstructed ``u``; the speed dispersion equals
-it to first order in the turbulence intensity).
+Accuracy: an ensemble of Mann boxes gives per-height ``(TI_lidar / TI_point)^2`` (pooled
+speed variance over the cup's), compared with `lidarjax.spectral.lidar_variance` for the
+same box wavenumbers, probe nodes, the five sliding-window beam-time patterns and 600 s
+records, with its (approximate) trilinear-interpolation transfer. The spectral model predicts
+the variance of the reconstructed ``u``; the speed dispersion equals it to first order in the
+turbulence intensity (the boxes are drawn at TI of about 5 %).
 
 Run: ``PYTHONPATH=$PWD python3 benchmarks/series.py [--quick]``. Writes
 ``benchmarks/results/series.{json,png,md}``.
@@ -46,6 +47,12 @@ HERE = Path(__file__).parent
 U, DIRECTION = 10.0, 270.0
 L_SCALE, GAMMA = 30.0, 3.9
 RECORDS_PER_YEAR = 52_560
+#: Spectral level of the accuracy boxes: sigma_u about 0.5 m/s (TI 5 %). The model predicts
+#: the variance of the reconstructed u; the .sta speed dispersion equals it to first order in
+#: TI only: the speed sqrt((U + u)^2 + v^2) adds v^2 / 2U, whose variance (the lidar's v is
+#: inflated by the w difference across the cone, growing with height) biases the ratio up by
+#: about 10-20 % at TI 25 %.
+ALPHA_EPS = 0.05
 
 
 def make_field(vel, spacing, dtype, anchor=(0.0, 0.0, 0.0)):
@@ -171,7 +178,7 @@ def main():
     results["lidarjax"] = speed
 
     # --- accuracy: ensemble of exact-spectrum boxes against the spectral model
-    # The point sensors sit on a column of box nodes (lateral anchor offset dy/2, heights on
+    # Low TI (ALPHA_EPS). The point sensors sit on a column of box nodes (lateral anchor offset dy/2, heights on
     # multiples of dz) and sample every 0.25 s (2.5 m of advection: positions spread evenly
     # over the 4 m cells), as the model's trilinear transfer for the point assumes.
     n_boxes = 3 if quick else 8
@@ -183,7 +190,8 @@ def main():
     t0 = time.perf_counter()
     fields = []
     for s in range(n_boxes):
-        v = fft_mann_box(acc_shape, acc_spacing, length_scale=L_SCALE, gamma=GAMMA, seed=100 + s)
+        v = fft_mann_box(acc_shape, acc_spacing, length_scale=L_SCALE, gamma=GAMMA,
+                         alphaepsilon=ALPHA_EPS, seed=100 + s)
         fields.append(make_field(v, acc_spacing, jnp.float64, anchor=anchor))
     ens = lidarjax.stack_fields(fields)
     st = simulate_statistics(ens, scan, mount, heights, np.arange(n_rec) * 600.0, probe=probe,
@@ -191,14 +199,17 @@ def main():
     var_l = np.asarray(st.speed_std) ** 2  # (e, r, h)
     var_p = np.asarray(st.cup_std) ** 2
     t_ens = time.perf_counter() - t0
-    beam_times = np.arange(5.0)[None, :] - np.array([[4.0, 4.0, 4.0, 4.0, 4.0]])  # one window
+    # The V2 rebuilds the vector after every LOS from the latest LOS of each beam: five window
+    # types, each with its own beam times (S1 to S3 is +2 s in three of them, -3 s in two).
+    # The model averages the lidar variance over them, with the simulator's probe nodes.
+    windows = [[j - last if j <= last else j - last - 5 for j in range(5)] for last in range(5)]
     model = []
     for h in heights:
-        lv = lidar_variance(scan, probe, h, L_SCALE, GAMMA, box_shape=acc_shape,
-                            box_spacing=acc_spacing, direction=DIRECTION, speed=U,
-                            record_length=600.0, beam_times=beam_times[0],
-                            interpolation="trilinear")
-        model.append(lv.ratio)
+        lvs = [lidar_variance(scan, probe, h, L_SCALE, GAMMA, box_shape=acc_shape,
+                              box_spacing=acc_spacing, direction=DIRECTION, speed=U,
+                              record_length=600.0, beam_times=np.asarray(w, float),
+                              probe_model="nodes", interpolation="trilinear") for w in windows]
+        model.append(np.mean([lv.lidar for lv in lvs]) / lvs[0].point)
     model = np.asarray(model)
     # the model is a ratio of expected variances: pool the variances, then divide; records
     # of one box share its largest scales, so the uncertainty is the spread over boxes

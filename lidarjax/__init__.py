@@ -25,6 +25,8 @@ from .inverse import InverseFlag as InverseFlag
 from .inverse import Inversion as Inversion
 from .inverse import invert as invert
 from .inverse import invert_reconstructed as invert_reconstructed
+from .motion import SampledMotion as SampledMotion
+from .motion import SinusoidalMotion as SinusoidalMotion
 from .mount import Mount as Mount
 from .probe import AbstractProbe as AbstractProbe
 from .probe import CWProbe as CWProbe
@@ -40,6 +42,14 @@ from .scan import reconstruct as reconstruct
 from .scan import windcube_v1 as windcube_v1
 from .scan import windcube_v2 as windcube_v2
 from .scan import zephir as zephir
+from .series import Series as Series
+from .series import SeriesStatistics as SeriesStatistics
+from .series import simulate_series as simulate_series
+from .series import simulate_statistics as simulate_statistics
+from .series import statistics as statistics
+from .series import write_series_sta as write_series_sta
+from .timing import Schedule as Schedule
+from .timing import schedule_for as schedule_for
 
 try:
     __version__ = importlib.metadata.version("lidarjax")

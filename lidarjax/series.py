@@ -478,6 +478,13 @@ def simulate_statistics(
 
     **Returns:** `SeriesStatistics` with fields ``(r, h)`` (``(e, r, h)`` for an ensemble),
     numpy arrays on the host.
+
+    **Float32 and long spans.** Times are in the field's dtype; a float32 time ``t`` resolves
+    ``ulp(t)`` (2 s at a year). A field with an ``advanced(time)`` method
+    (`lidarjax.scenes.FrozenTurbulence`, reduced in float64 on the host) is advanced to each
+    chunk's first start and sampled at times relative to it, so any span keeps the resolution
+    of one chunk (``chunk * record_length``; 0.004 s for 64 records). With a motion or an
+    ensemble, times stay absolute: use float64 (x64) for spans beyond about a day in float32.
     """
     schedule = schedule_for(scan) if schedule is None else schedule
     probe = PointProbe() if probe is None else probe
@@ -503,14 +510,20 @@ def simulate_statistics(
     if n_dev > 1:
         mesh = jax.sharding.Mesh(np.asarray(devices), ("records",))
         sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("records"))
+    # Float32 times far from 0 are coarse (ulp(3e7 s) = 2 s). A field that can move its own
+    # clock on the host in float64 (`FrozenTurbulence.advanced`) is advanced to each chunk's
+    # first start and sees times relative to it (a chunk spans chunk * record_length).
+    rebase = motion is None and not ensemble and hasattr(field, "advanced")
     out = []
     for i in range(0, starts.size, chunk):
         part = starts[i:i + chunk]
         pad = np.concatenate([part, np.full(chunk - part.size, part[-1])])
-        s = jnp.asarray(pad, dtype)
+        base = float(part[0]) if rebase else 0.0
+        f_chunk = field.advanced(base) if rebase else field
+        s = jnp.asarray(pad - base, dtype)
         if sharding is not None:
             s = jax.device_put(s, sharding)
-        res = fn(field, scan, mount, heights, s, schedule, probe, motion,
+        res = fn(f_chunk, scan, mount, heights, s, schedule, probe, motion,
                  jnp.asarray(point_dt, dtype))
         out.append(jax.tree_util.tree_map(lambda a, k=part.size: np.asarray(a)[..., :k, :], res))
     return jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=-2), *out)

@@ -329,3 +329,28 @@ def test_series_command_writes_sta_and_statistics(tmp_path, capsys):
     assert "TI_lidar" in capsys.readouterr().out
     assert main(args + ["--hours", "0.01"]) == 2
     assert "no whole 10-minute record" in capsys.readouterr().err
+
+
+def test_float32_year_long_records_keep_their_time_resolution():
+    """A record a year in, in float32, matches the float64 simulation of that record (float32
+    times of 3e7 s alone would be rounded to 2 s): FrozenTurbulence is advanced per chunk on
+    the host."""
+    from lidarjax.scenes import FrozenTurbulence, TurbulenceBox
+    from lidarjax.turbulence_box import fft_mann_box
+
+    vel = fft_mann_box((64, 8, 8), (8.0, 8.0, 8.0), sigma_u=1.0, seed=0)
+
+    def field(dtype):
+        box = TurbulenceBox(jnp.asarray(vel, dtype), jnp.asarray([8.0, 8.0, 8.0], dtype),
+                            periodic=(True, True))
+        return FrozenTurbulence(lidarjax.scenes.uniform(10.0, 270.0, dtype=dtype), box, 10.0, 270.0)
+
+    year = 365.25 * 86400.0 + 123.4
+    kw = dict(record_length=60.0, chunk=1)
+    st_far = simulate_statistics(field(jnp.float32), lidarjax.windcube_v1(), MOUNT, [30.0], [year],
+                                 **kw)
+    st_ref = simulate_statistics(field(jnp.float64), lidarjax.windcube_v1(), MOUNT, [30.0], [year],
+                                 **kw)
+    assert st_far.speed.dtype == np.float32
+    np.testing.assert_allclose(st_far.speed_std, st_ref.speed_std, rtol=1e-4)
+    np.testing.assert_allclose(st_far.speed, st_ref.speed, rtol=1e-6)
