@@ -110,9 +110,11 @@ def run(args) -> int:
         raise ValueError(f"--ti must be positive, got {args.ti}")
     scan = make_scan(args.scan, args.cone_angle)
     if args.tilt_compensation:
-        import equinox as eqx
+        from .. import scan as scans
 
-        scan = eqx.tree_at(lambda s: s.tilt_compensation, scan, True)
+        make = getattr(scans, args.scan)
+        scan = (make(tilt_compensation=True) if args.cone_angle is None
+                else make(args.cone_angle, tilt_compensation=True))
     if args.probe == "auto":
         args.probe = "cw" if args.scan == "zephir" else "pulsed"
     probe = make_probe(args)
