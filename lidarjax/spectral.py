@@ -68,10 +68,11 @@ def mann_eddy_lifetime(kl):
 
 
 def mann_tensor(k, alphaepsilon, length_scale, gamma):
-    """The Mann (1994) spectral velocity tensor ``Phi_ij(k)`` (m^5 s^-2 per (rad/m)^3... i.e.
-    ``(m/s)^2 m^3``) at wavenumbers `k` ``(..., 3)`` in rad/m (box frame: ``x`` downwind, ``z``
-    up), for ``alphaepsilon`` = ``alpha eps^(2/3)`` (m^(4/3)/s^2), length scale ``L`` (m) and
-    anisotropy ``Gamma``. Returns ``(..., 3, 3)``; zero at ``k = 0``.
+    """The Mann (1994) spectral velocity tensor ``Phi_ij(k)`` in ``(m/s)^2 m^3`` (variance per
+    unit volume of wavenumber space, so ``sum_k Phi dk`` is a covariance in m^2/s^2) at
+    wavenumbers `k` ``(..., 3)`` in rad/m (box frame: ``x`` downwind, ``y`` to the left,
+    ``z`` up), for ``alphaepsilon`` = ``alpha eps^(2/3)`` (m^(4/3)/s^2), length scale ``L`` (m)
+    and anisotropy ``Gamma``. Returns ``(..., 3, 3)``; zero at ``k = 0``.
 
     Sheared von Karman tensor (Mann 1994, J. Fluid Mech. 273, eqs. 12-16): the isotropic
     spectrum ``E(k) = alphaepsilon L^(5/3) (kL)^4 / (1 + (kL)^2)^(17/6)`` at the undistorted
