@@ -34,7 +34,10 @@ differentiable forward model). Units: wavenumbers in rad/m, ``alphaepsilon`` in
 from __future__ import annotations
 
 import dataclasses
+import functools
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 from scipy import special
 
@@ -65,10 +68,11 @@ def mann_eddy_lifetime(kl):
 
 
 def mann_tensor(k, alphaepsilon, length_scale, gamma):
-    """The Mann (1994) spectral velocity tensor ``Phi_ij(k)`` (m^5 s^-2 per (rad/m)^3... i.e.
-    ``(m/s)^2 m^3``) at wavenumbers `k` ``(..., 3)`` in rad/m (box frame: ``x`` downwind, ``z``
-    up), for ``alphaepsilon`` = ``alpha eps^(2/3)`` (m^(4/3)/s^2), length scale ``L`` (m) and
-    anisotropy ``Gamma``. Returns ``(..., 3, 3)``; zero at ``k = 0``.
+    """The Mann (1994) spectral velocity tensor ``Phi_ij(k)`` in ``(m/s)^2 m^3`` (variance per
+    unit volume of wavenumber space, so ``sum_k Phi dk`` is a covariance in m^2/s^2) at
+    wavenumbers `k` ``(..., 3)`` in rad/m (box frame: ``x`` downwind, ``y`` to the left,
+    ``z`` up), for ``alphaepsilon`` = ``alpha eps^(2/3)`` (m^(4/3)/s^2), length scale ``L`` (m)
+    and anisotropy ``Gamma``. Returns ``(..., 3, 3)``; zero at ``k = 0``.
 
     Sheared von Karman tensor (Mann 1994, J. Fluid Mech. 273, eqs. 12-16): the isotropic
     spectrum ``E(k) = alphaepsilon L^(5/3) (kL)^4 / (1 + (kL)^2)^(17/6)`` at the undistorted
@@ -153,19 +157,35 @@ def probe_transfer(probe, kappa, focus_range, *, model: str = "weight"):
             return np.exp(-g * np.abs(kappa))
         raise ValueError(f"probe_transfer: no closed form for {type(probe).__name__}; use model='nodes'.")
     if model == "truncated":
-        half = float(np.asarray(probe.support(r)))
-        x, w = np.polynomial.legendre.leggauss(2000)
-        o = half * x
-        phi = np.asarray(probe.weight(o, r), dtype=np.float64) * w
+        x, w = _legendre(2000)
+        half, phi = _truncated_weight(probe, x, r)
+        o = float(half) * x
+        phi = np.asarray(phi, dtype=np.float64) * w
         phi = phi / phi.sum()
         return np.cos(np.multiply.outer(kappa, o)) @ phi
     if model == "nodes":
-        offsets, weights = probe.nodes(np.asarray(r))
+        offsets, weights = _nodes(probe, r)
         o = np.asarray(offsets, np.float64).reshape(-1)
         wq = np.broadcast_to(np.asarray(weights, np.float64).reshape(-1), o.shape)
         wq = wq / wq.sum()
         return np.cos(np.multiply.outer(kappa, o)) @ wq
     raise ValueError(f"probe_transfer: model must be 'weight', 'truncated' or 'nodes', got {model!r}.")
+
+
+@functools.lru_cache(maxsize=4)
+def _legendre(n):
+    return special.roots_legendre(n)
+
+
+@eqx.filter_jit
+def _truncated_weight(probe, x, r):
+    half = probe.support(r)
+    return half, probe.weight(half * x, r)
+
+
+@eqx.filter_jit
+def _nodes(probe, r):
+    return probe.nodes(jnp.asarray(r))
 
 
 def box_wavenumbers(shape, spacing):

@@ -2,6 +2,9 @@
 
 - `lidarjax.scenes.analytic`: the validation flows (uniform, power law, linear, hemisphere,
   hill), all linear in the free stream.
+- `lidarjax.scenes.turbulence`: `FrozenTurbulence`, any mean field plus a `TurbulenceBox`
+  advected with the wind (Taylor), time-dependent through ``sample_local_at``; `mann_box`
+  generates boxes with hipersim (extra ``turbulence``).
 
 Every scene is an `AbstractField` (CFD frame: ``+x`` east, ``+y`` north, ``+z`` up, metres
 and m/s; directions meteorological), dynamic and differentiable in all its parameters.

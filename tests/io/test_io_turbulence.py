@@ -99,6 +99,8 @@ def test_hawc2_box_from_hipersim(tmp_path):
     gen = scenes.mann_box(0.1, 30.0, 3.2, shape, spacing, seed=4, periodic=True)
     np.testing.assert_allclose(np.asarray(gen.velocity), want, rtol=1e-12, atol=1e-12)
     assert gen.periodic == (True, True)
+    doubled = scenes.mann_box(0.1, 30.0, 3.2, shape, spacing, seed=4)  # hipersim's y/z doubling
+    assert doubled.periodic == (False, False) and doubled.shape == shape
     # write back, hipersim reads it
     out = write_hawc2_box(box, *(tmp_path / f"back_{c}.bin" for c in "uvw"))
     back = hipersim.MannTurbulenceField.from_hawc2([str(p) for p in out], 0.1, 30.0, 3.2, shape,
