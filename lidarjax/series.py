@@ -465,6 +465,10 @@ def simulate_statistics(
     """Statistics of many records, streamed: each record is simulated and reduced to its
     statistics inside one compiled function, so no raw LOS outlives its chunk.
 
+    Each record is simulated on its own from its start: its first reconstruction needs one
+    full cycle, so a sliding Windcube record holds ``n_los - b + 1`` vectors (V2: 596 of the
+    instrument's 600; the few windows straddling the previous record are not rebuilt).
+
     **Arguments:** as `simulate_series`, plus
 
     - `starts`: ``(r,)`` record start times, s (each record spans `record_length`);
