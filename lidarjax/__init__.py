@@ -25,6 +25,8 @@ from .inverse import InverseFlag as InverseFlag
 from .inverse import Inversion as Inversion
 from .inverse import invert as invert
 from .inverse import invert_reconstructed as invert_reconstructed
+from .motion import SampledMotion as SampledMotion
+from .motion import SinusoidalMotion as SinusoidalMotion
 from .mount import Mount as Mount
 from .probe import AbstractProbe as AbstractProbe
 from .probe import CWProbe as CWProbe
@@ -44,8 +46,17 @@ from .sensitivity import Budget as Budget
 from .sensitivity import Sensitivity as Sensitivity
 from .sensitivity import sensitivity as sensitivity
 from .sensitivity import uncertainty as uncertainty
+from .series import Series as Series
+from .series import SeriesStatistics as SeriesStatistics
+from .series import simulate_series as simulate_series
+from .series import simulate_statistics as simulate_statistics
+from .series import statistics as statistics
+from .series import write_series_sta as write_series_sta
+from .timing import Schedule as Schedule
+from .timing import schedule_for as schedule_for
 
 try:
     __version__ = importlib.metadata.version("lidarjax")
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
+from . import spectral as spectral

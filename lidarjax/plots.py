@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["plot_profiles", "plot_los_fit", "plot_roses", "plot_sensitivity", "sensitivity_map",
-           "plot_budget", "plot_sensitivity_profiles"]
+           "plot_budget", "plot_sensitivity_profiles", "plot_series_ti"]
 
 _COLOURS = {"point": "k", "windcube_v1": "C0", "windcube_v2": "C1", "zephir": "C2"}
 _LABELS = {"point": "point above the lidar", "windcube_v1": "Windcube V1",
@@ -237,3 +237,36 @@ def plot_sensitivity_profiles(z_over_h, inputs, jacobian: dict, units: dict, pat
     fig.suptitle(title or "sensitivity profiles (mean over sectors, band: range)")
     fig.tight_layout()
     return _save(fig, path)
+def plot_series_ti(heights, lidar_ti, cup_ti, sonic_ti, path, *, label="lidar", title=None) -> Path:
+    """Lidar against point-sensor turbulence intensity: left, per record and height (one
+    colour per height, the 1:1 line dashed); right, the mean profile of the lidar's, the
+    cup's and the sonic's TI. Arrays ``(r, h)``, heights ``(h,)`` m."""
+    plt = _pyplot()
+    heights = np.asarray(heights)
+    lidar_ti, cup_ti, sonic_ti = (np.asarray(a, float) for a in (lidar_ti, cup_ti, sonic_ti))
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4.2))
+    cmap = plt.get_cmap("viridis")
+    for k, h in enumerate(heights):
+        ax.scatter(100 * cup_ti[:, k], 100 * lidar_ti[:, k], s=8, alpha=0.6,
+                   color=cmap(k / max(len(heights) - 1, 1)), label=f"{h:g} m")
+    both = np.concatenate([cup_ti.ravel(), lidar_ti.ravel()])
+    both = both[np.isfinite(both)]
+    if both.size:
+        lo, hi = 100 * both.min(), 100 * both.max()
+        ax.plot([lo, hi], [lo, hi], "k--", lw=1)
+    ax.set_xlabel("cup TI (%)")
+    ax.set_ylabel(f"{label} TI (%)")
+    ax.legend(fontsize=7, ncol=2, title="height")
+    ax.set_title("per 10-minute record")
+    for arr, name, style in ((lidar_ti, label, "o-"), (cup_ti, "cup", "s--"),
+                             (sonic_ti, "sonic (longitudinal)", "^:")):
+        bx.plot(100 * np.nanmean(arr, axis=0), heights, style, label=name)
+    bx.set_xlabel("mean TI (%)")
+    bx.set_ylabel("height above the lidar (m)")
+    bx.legend(fontsize=8)
+    bx.set_title("mean over records")
+    if title:
+        fig.suptitle(title)
+    path = _save(fig, path)
+    plt.close(fig)
+    return path

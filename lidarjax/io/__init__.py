@@ -19,6 +19,7 @@ from .fields import read_fluent_points as read_fluent_points
 from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
+from .motion import read_motion_csv as read_motion_csv
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord
@@ -45,5 +46,10 @@ from .sta import read_sta as read_sta
 from .sta import write_sta as write_sta
 from .tables import load_table as load_table
 from .tables import save_table as save_table
+from .turbulence import TurbSimField as TurbSimField
+from .turbulence import read_hawc2_box as read_hawc2_box
+from .turbulence import read_turbsim as read_turbsim
+from .turbulence import write_hawc2_box as write_hawc2_box
+from .turbulence import write_turbsim as write_turbsim
 from .zephir import ZephirRecord as ZephirRecord
 from .zephir import read_zephir_csv as read_zephir_csv

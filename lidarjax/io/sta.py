@@ -226,6 +226,9 @@ def write_sta(
     w=None,
     speed_std=None,
     availability=None,
+    speed_min=None,
+    speed_max=None,
+    w_std=None,
     scan_angle: float | None = None,
     direction_offset: float = 0.0,
     system: str = "lidarjax synthetic",
@@ -237,7 +240,9 @@ def write_sta(
 
     **Arguments:** `time` ``(t,)`` datetime64 (end of interval); `heights` ``(k,)`` m;
     `speed`, `direction` ``(t, k)`` (m/s; meteorological degrees); optional `w`,
-    `speed_std` (m/s) and `availability` (percent) ``(t, k)``; `scan_angle` and
+    `speed_std` (m/s) and `availability` (percent) ``(t, k)``; optional `speed_min`,
+    `speed_max` and `w_std` (m/s) ``(t, k)`` add the min, max and Z-wind dispersion
+    columns (absent when not given); `scan_angle` and
     `direction_offset` in degrees. NaN is written as ``NaN``.
 
     **Returns:** the path written.
@@ -252,6 +257,9 @@ def write_sta(
     cols = {"Wind Speed (m/s)": speed, "Wind Speed Dispersion (m/s)": speed_std,
             "Wind Direction (\u00b0)": direction, "Z-wind (m/s)": w,
             "Data Availability (%)": availability}
+    optional = {"Wind Speed min (m/s)": speed_min, "Wind Speed max (m/s)": speed_max,
+                "Z-wind Dispersion (m/s)": w_std}
+    cols.update({name: value for name, value in optional.items() if value is not None})
     arrays = {}
     for name, value in cols.items():
         a = np.full((t, k), np.nan) if value is None else np.asarray(value, dtype=np.float64)

@@ -2,6 +2,9 @@
 
 - `lidarjax.scenes.analytic`: the validation flows (uniform, power law, linear, hemisphere,
   hill), all linear in the free stream.
+- `lidarjax.scenes.turbulence`: `FrozenTurbulence`, any mean field plus a `TurbulenceBox`
+  advected with the wind (Taylor), time-dependent through ``sample_local_at``; `mann_box`
+  generates boxes with hipersim (extra ``turbulence``).
 
 Every scene is an `AbstractField` (CFD frame: ``+x`` east, ``+y`` north, ``+z`` up, metres
 and m/s; directions meteorological), dynamic and differentiable in all its parameters.
@@ -18,3 +21,7 @@ from .analytic import hill as hill
 from .analytic import linear as linear
 from .analytic import power_law as power_law
 from .analytic import uniform as uniform
+from .turbulence import FrozenTurbulence as FrozenTurbulence
+from .turbulence import TurbulenceBox as TurbulenceBox
+from .turbulence import frozen_turbulence as frozen_turbulence
+from .turbulence import mann_box as mann_box

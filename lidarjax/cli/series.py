@@ -1,0 +1,213 @@
+"""`lidarjax series`: a lidar's simulated 10-minute statistics in frozen turbulence over a
+mean flow -> a simulated ``.sta``, the statistics as CSV and lidar against point TI."""
+
+from __future__ import annotations
+
+import argparse
+
+from ._common import SCAN_CHOICES, add_probe_arguments, vector
+
+
+def _ints(text: str) -> tuple[int, int, int]:
+    try:
+        values = tuple(int(v) for v in text.replace(" ", "").split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three integers 'nx,ny,nz', got {text!r}") from None
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected three integers 'nx,ny,nz', got {text!r}")
+    return values
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "series", help="simulated 10-minute statistics (.sta) in frozen turbulence over a mean flow",
+        description="Simulate every line of sight at the time it is taken through a turbulence "
+                    "box advected over a mean flow (Taylor), build the instrument's "
+                    "reconstructions and reduce them to 10-minute statistics: a simulated .sta "
+                    "(speed, dispersion, min, max, direction, Z-wind, availability), a CSV with "
+                    "lidar, cup and sonic statistics, and a figure of lidar TI against point TI "
+                    "per height. The lidar location and heights come from the seed settings.dat.",
+        epilog="examples:\n"
+               "  lidarjax series settings.dat --field uniform --speed 10 --direction 270 "
+               "--generate-box 512,32,32 --out series/\n"
+               "  lidarjax series settings.dat --field run.npz --box turb.bts --scan zephir "
+               "--hours 6 --out series/\n"
+               "  lidarjax series settings.dat --field run.npz --box u.bin,v.bin,w.bin "
+               "--box-shape 8192,32,32 --box-spacing 2,4,4 --out series/",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("settings", help="the seed's settings.dat (location, angles, heights)")
+    p.add_argument("--beta", type=float, default=None,
+                   help="platform rotation row to use (default: the file's beta)")
+    p.add_argument("--field", required=True,
+                   help="mean flow: a CFD field file (.npz, .nc, Fluent ASCII) or 'uniform' "
+                        "(uniform wind of --speed from --direction)")
+    box = p.add_mutually_exclusive_group(required=True)
+    box.add_argument("--box", help="turbulence box: a TurbSim .bts file, or three HAWC2 "
+                                   "binary files 'u.bin,v.bin,w.bin' (with --box-shape)")
+    box.add_argument("--generate-box", type=_ints, metavar="NX,NY,NZ",
+                     help="generate a periodic Mann box of this many nodes")
+    p.add_argument("--box-shape", type=_ints, default=None, help="HAWC2 box nodes nx,ny,nz")
+    p.add_argument("--box-spacing", type=vector, default=(4.0, 4.0, 4.0),
+                   help="box node spacing dx,dy,dz in metres (default 4,4,4)")
+    p.add_argument("--length-scale", type=float, default=30.0, help="Mann L, m (default 30)")
+    p.add_argument("--gamma", type=float, default=3.9, help="Mann Gamma (default 3.9)")
+    p.add_argument("--ti", type=float, default=0.10,
+                   help="generated box: sigma_u = ti * advection speed (default 0.10)")
+    p.add_argument("--seed", type=int, default=0, help="generated box: random seed")
+    p.add_argument("--generator", choices=("builtin", "hipersim"), default="builtin",
+                   help="box generator: lidarjax's numpy FFT (default) or hipersim (extra "
+                        "'turbulence')")
+    p.add_argument("--speed", type=float, default=None,
+                   help="advection speed, m/s (default: the mean flow above the lidar at the "
+                        "top height; required for --field uniform)")
+    p.add_argument("--direction", type=float, default=None,
+                   help="advection direction, degrees from CFD +y, meteorological (default: "
+                        "the mean flow's there)")
+    p.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v2")
+    p.add_argument("--cone-angle", type=float, default=None,
+                   help="cone angle in degrees (default: the scan's)")
+    p.add_argument("--seconds-per-los", type=float, default=None,
+                   help="override the scan's time per LOS (defaults: V1 1.5, V2 1.0, ZephIR "
+                        "0.02 s)")
+    p.add_argument("--tilt-compensation", action="store_true",
+                   help="the instrument corrects its reconstruction for its tilt")
+    p.add_argument("--motion", default=None,
+                   help="platform motion log CSV (time,surge,sway,heave,pitch,roll,yaw)")
+    add_probe_arguments(p)
+    p.set_defaults(probe="auto")
+    p.add_argument("--start", default="2024-01-01T00:00",
+                   help="date and time of the first record's start (default 2024-01-01T00:00)")
+    p.add_argument("--hours", type=float, default=24.0,
+                   help="hours simulated, whole 10-minute records (default 24)")
+    p.add_argument("--chunk", type=int, default=36, help="records per compiled batch")
+    p.add_argument("--no-plots", action="store_true", help="skip the figure")
+    p.add_argument("--out", default=".", help="output folder (default: .)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..io import read_settings
+    from ..series import RECORD_LENGTH, simulate_statistics, write_series_report
+    from ..timing import schedule_for
+    from ._common import make_probe, make_scan
+
+    settings = read_settings(args.settings)
+    beta = float(settings.beta if args.beta is None else args.beta)
+    location = settings.location(beta)
+    heights = np.asarray(settings.heights())
+    try:
+        start = np.datetime64(args.start, "s")
+    except ValueError:
+        raise ValueError(f"--start {args.start!r} is not a date and time (e.g. 2024-01-01T00:00)") from None
+    n_rec = int(np.floor(args.hours * 3600.0 / RECORD_LENGTH + 1e-9))
+    if n_rec < 1:
+        raise ValueError(f"--hours {args.hours} holds no whole 10-minute record")
+    if args.ti <= 0:
+        raise ValueError(f"--ti must be positive, got {args.ti}")
+    scan = make_scan(args.scan, args.cone_angle)
+    if args.tilt_compensation:
+        from .. import scan as scans
+
+        make = getattr(scans, args.scan)
+        scan = (make(tilt_compensation=True) if args.cone_angle is None
+                else make(args.cone_angle, tilt_compensation=True))
+    if args.probe == "auto":
+        args.probe = "cw" if args.scan == "zephir" else "pulsed"
+    probe = make_probe(args)
+    schedule = schedule_for(scan, seconds_per_los=args.seconds_per_los)
+    field, info = build_field(args, settings, beta, location, heights)
+    from ..mount import Mount
+
+    mount = Mount(location, beta=beta, gamma=settings.gamma, psi=settings.psi,
+                  epsilon=settings.epsilon)
+    motion = None
+    if args.motion:
+        from ..io import read_motion_csv
+
+        motion = read_motion_csv(args.motion)
+    starts = np.arange(n_rec) * RECORD_LENGTH
+    print(f"lidarjax series: {args.scan} ({type(probe).__name__ if probe else 'point probe'}), "
+          f"{heights.size} heights, {n_rec} records; {info}")
+    stats = simulate_statistics(field, scan, mount, heights, starts, schedule=schedule,
+                                probe=probe, motion=motion, chunk=args.chunk)
+    meta = {"settings": str(args.settings), "field": args.field, "scan": args.scan,
+            "beta_deg": beta, "box": info, "start": str(start)}
+    res = write_series_report(Path(args.out), stats, heights, starts, start_datetime=start,
+                              scan=scan, metadata=meta, plots=not args.no_plots,
+                              label=args.scan)
+    print(f"{'height':>7s} {'U_lidar':>8s} {'TI_lidar':>9s} {'TI_cup':>7s} {'TI_sonic':>9s} "
+          f"{'avail%':>7s}")
+    for k, h in enumerate(heights):
+        print(f"{h:7.1f} {np.nanmean(stats.speed[:, k]):8.3f} {np.nanmean(stats.ti[:, k]):9.4f} "
+              f"{np.nanmean(stats.cup_ti[:, k]):7.4f} {np.nanmean(stats.sonic_ti[:, k]):9.4f} "
+              f"{np.nanmean(stats.availability[:, k]):7.1f}")
+    wrote = [str(res["sta"]), str(res["csv"])] + ([str(res["plot"])] if res["plot"] else [])
+    print("wrote " + ", ".join(wrote) + (f" ({res['note']})" if res["note"] else ""))
+    return 0
+
+
+def build_field(args, settings, beta, location, heights):
+    """The frozen-turbulence field of the arguments and a one-line description."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from ..angles import horizontal_speed, wind_direction
+    from ..scenes import FrozenTurbulence, TurbulenceBox, uniform
+
+    if args.field == "uniform":
+        if args.speed is None or args.direction is None:
+            raise ValueError("--field uniform needs --speed and --direction")
+        mean = uniform(args.speed, args.direction)
+    else:
+        from ..io.fields import load_field
+
+        mean = load_field(args.field)
+    origin = np.asarray(mean.origin, np.float64) + np.asarray(mean.origin_lo, np.float64)
+    anchor = np.asarray(location, np.float64) - origin
+    if args.speed is None or args.direction is None:
+        top = np.asarray(location, np.float64) + np.array([0.0, 0.0, float(heights[-1])])
+        v = mean.sample(top[None, :])[0]
+        if not bool(jnp.all(jnp.isfinite(v))):
+            raise ValueError(f"the mean flow is undefined above the lidar at {top.tolist()}; "
+                             "give --speed and --direction")
+    speed = float(horizontal_speed(v)) if args.speed is None else float(args.speed)
+    direction = float(wind_direction(v)) if args.direction is None else float(args.direction)
+    if not speed > 0:
+        raise ValueError(f"the advection speed must be positive, got {speed}")
+    spacing = tuple(float(s) for s in args.box_spacing)
+    if args.generate_box is not None:
+        sigma = args.ti * speed
+        if args.generator == "hipersim":
+            from ..scenes import mann_box
+
+            box = mann_box(1.0, args.length_scale, args.gamma, args.generate_box, spacing,
+                           seed=args.seed, periodic=True)
+            box = box.scaled(sigma / float(jnp.std(box.velocity[..., 0])))
+        else:
+            from ..turbulence_box import fft_mann_box
+
+            vel = fft_mann_box(args.generate_box, spacing, length_scale=args.length_scale,
+                               gamma=args.gamma, sigma_u=sigma, seed=args.seed)
+            box = TurbulenceBox(jnp.asarray(vel, mean.dtype), jnp.asarray(spacing, mean.dtype),
+                                periodic=(True, True))
+        info = (f"generated Mann box {args.generate_box} x {spacing} m ({args.generator}, "
+                f"L = {args.length_scale:g} m, Gamma = {args.gamma:g}, sigma_u = {sigma:.3g} m/s)")
+    else:
+        from ..io import read_hawc2_box, read_turbsim
+
+        parts = args.box.split(",")
+        if len(parts) == 1:
+            box = read_turbsim(parts[0]).box(speed)
+        elif len(parts) == 3:
+            if args.box_shape is None:
+                raise ValueError("HAWC2 boxes need --box-shape nx,ny,nz (and --box-spacing)")
+            box = read_hawc2_box(*parts, args.box_shape, spacing)
+        else:
+            raise ValueError(f"--box must be one .bts file or three files u,v,w; got {args.box!r}")
+        info = f"box {args.box}"
+    field = FrozenTurbulence(mean, box, speed, direction, anchor=anchor)
+    return field, info + f", advected at {speed:.3g} m/s from {direction:.1f} deg"

@@ -1,0 +1,629 @@
+"""Time series: every line of sight (LOS) at the time it is taken, the instrument's
+reconstructions from beams taken at different times, and the 10-minute statistics of a
+``.sta`` file.
+
+`simulate_series` runs a scan `Schedule` (`lidarjax.timing`) through a time-dependent field
+(`AbstractField.sample_local_at`: frozen turbulence over a mean flow; a steady field gives a
+constant series) with an optional platform `lidarjax.motion` motion:
+
+1. LOS times ``(m, h, b)`` from the schedule (``m`` cycles, or rotations for sequential
+   heights); each LOS is the probe-weighted projection of the field *at its own time* along
+   the beam of the mount *at that time* (the forward model's probe quadrature,
+   `lidarjax.forward._beam_los`, on the field frozen at that instant), minus the
+   lidar's own velocity along the beam;
+2. reconstructions as the instrument builds them (`Schedule.update`): Windcube, after each
+   new LOS from the latest LOS of every beam (so consecutive vectors share 4 of 5 LOS and
+   mix beams up to one cycle apart); ZephIR, once per height visit from the LOS of its
+   rotations. The wind vector is `lidarjax.reconstruct` of those LOS in the lidar frame,
+   turned to the north frame by the software offset (and by the tilt at the reconstruction's
+   time with ``Scan(..., tilt_compensation=True)``);
+3. point sensors directly above the lidar's location at rest sample the field every
+   `point_dt` seconds (a cup and a sonic anemometer at each height).
+
+`statistics` reduces a series to what the ``.sta`` reports per record and height, plus
+turbulence intensities and the point sensors' statistics (`SeriesStatistics`);
+`simulate_statistics` streams many records (and an ensemble of fields) through
+`simulate_series` + `statistics` in jit-compiled, vmapped and device-sharded chunks, keeping
+only the statistics; `write_series_sta` writes them with `lidarjax.io.write_sta`.
+
+Dimensions: ``m`` LOS cycles (rotations), ``h`` heights, ``b`` beams, ``n`` reconstructions,
+``p`` point samples, ``r`` records, ``e`` ensemble members. Times in seconds, speeds m/s,
+directions meteorological degrees (where the wind comes from, clockwise from north).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ._precision import difference
+from .angles import horizontal_speed, wind_direction
+from .field import AbstractField
+from .forward import _beam_los, _validate
+from .frames import (
+    body_to_cfd_rotation,
+    cfd_to_north_rotation,
+    lidar_to_cfd_rotation,
+    lidar_to_north_rotation,
+    rotate,
+    tilt_rotation,
+)
+from .motion import AbstractMotion
+from .mount import Mount
+from .probe import AbstractProbe, PointProbe
+from .scan import Scan, reconstruct
+from .timing import Schedule, schedule_for
+
+__all__ = ["Series", "SeriesStatistics", "simulate_series", "statistics", "simulate_statistics",
+           "write_series_sta", "write_series_report", "RECORD_LENGTH"]
+
+#: Seconds in one statistics record (the ``.sta`` 10-minute interval).
+RECORD_LENGTH = 600.0
+
+
+class Series(eqx.Module):
+    """A simulated lidar time series (`simulate_series`).
+
+    - `heights`: ``(h,)`` m above the lidar.
+    - `los_time`: ``(m, h, b)`` time of every LOS, s; `los`: ``(m, h, b)`` LOS, m/s
+      (positive away from the lidar; NaN outside the field).
+    - `time`: ``(n, h)`` time of each reconstruction (its latest LOS), s.
+    - `velocity`: ``(n, h, 3)`` reconstructed wind, north frame, m/s (NaN when a LOS is).
+    - `point_time`: ``(p,)`` s; `point_velocity`: ``(p, h, 3)`` true wind directly above the
+      lidar's location at rest, north frame, m/s.
+    - `start`, `duration`: the span simulated, s.
+    """
+
+    heights: Float[Array, " h"]
+    los_time: Float[Array, "m h b"]
+    los: Float[Array, "m h b"]
+    time: Float[Array, "n h"]
+    velocity: Float[Array, "n h 3"]
+    point_time: Float[Array, " p"]
+    point_velocity: Float[Array, "p h 3"]
+    start: Float[Array, ""]
+    duration: Float[Array, ""]
+
+    @property
+    def speed(self) -> Float[Array, "n h"]:
+        """Horizontal speed of each reconstruction, m/s."""
+        return horizontal_speed(self.velocity)
+
+    @property
+    def direction(self) -> Float[Array, "n h"]:
+        """Meteorological direction of each reconstruction, degrees."""
+        return wind_direction(self.velocity)
+
+
+class _AtTime(AbstractField):
+    """A field frozen at given times: lets the forward model's probe quadrature
+    (`lidarjax.forward._beam_los`) sample a time-dependent field unchanged. `time` is a
+    scalar or one time per beam focus ``(h, b)``; the quadrature's extra node axis (points
+    ``(h, b, q, 3)``) shares its focus' time."""
+
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
+    field: AbstractField
+    time: Float[Array, ...]
+
+    def _time(self, points):
+        t = self.time
+        return t if t.ndim >= points.ndim - 1 else t[..., None]
+
+    def sample_local(self, points):
+        return self.field.sample_local_at(points, self._time(points))
+
+    def los_local(self, points, directions):
+        return self.field.los_local_at(points, directions, self._time(points))
+
+
+def _check_span(times, schedule: Schedule, n_heights: int):
+    """(start, n_cycles) from `times` = (start, duration) (host numbers)."""
+    try:
+        start, duration = (float(np.asarray(v)) for v in times)
+    except (TypeError, ValueError):
+        raise ValueError("simulate_series: `times` must be (start, duration) in seconds, e.g. "
+                         "(0.0, 600.0).") from None
+    try:
+        period, refocus = float(np.asarray(schedule.period)), float(np.asarray(schedule.refocus))
+    except jax.errors.TracerArrayConversionError:
+        raise ValueError("simulate_series: the schedule's period must be concrete (it sets the "
+                         "number of LOS); build the Schedule outside jit.") from None
+    cycle = (n_heights * (schedule.rotations_per_height * period + refocus)
+             if schedule.heights_sequential else period)
+    n = int(np.floor(duration / cycle + 1e-9))
+    if not np.isfinite(start) or not np.isfinite(duration) or n < 1:
+        raise ValueError(f"simulate_series: the span (start={start}, duration={duration} s) must "
+                         f"be finite and hold at least one scan cycle of {cycle:g} s.")
+    return start, duration, n
+
+
+def _window_index(order: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sliding reconstruction windows over ``m`` cycles of beams taken in `order`.
+
+    Returns ``(cycle (n, b), last (n,))``: for window ``k``, the cycle each beam's latest LOS
+    comes from, and the beam just taken. Window 0 is the first complete cycle; then one
+    window per new LOS."""
+    b = order.size
+    rank = np.empty(b, int)
+    rank[order] = np.arange(b)
+    cyc = [np.zeros(b, int)]
+    last = [order[-1]]
+    for c in range(1, m):
+        for r in range(b):
+            cyc.append(c - (rank > r).astype(int))
+            last.append(order[r])
+    return np.asarray(cyc), np.asarray(last)
+
+
+def simulate_series(
+    field: AbstractField,
+    scan: Scan,
+    mount: Mount,
+    heights: Float[ArrayLike, " h"],
+    times: tuple[float, float],
+    *,
+    schedule: Schedule | None = None,
+    probe: AbstractProbe | None = None,
+    motion: AbstractMotion | None = None,
+    point_dt: float = 1.0,
+) -> Series:
+    """Simulate the lidar's time series: every LOS at the time it is taken.
+
+    **Arguments:**
+
+    - `field`: a time-dependent field (e.g. frozen turbulence over a mean flow; CFD frame,
+      m/s) or any steady field.
+    - `scan`, `mount`, `heights`, `probe`: as in `lidarjax.simulate`.
+    - `times`: ``(start, duration)`` seconds: whole scan cycles from `start` that fit in
+      `duration` (host numbers: they set the number of LOS).
+    - `schedule`: the scan timing (default `lidarjax.timing.schedule_for(scan)`).
+    - `motion`: platform motion (`lidarjax.motion`), default none.
+    - `point_dt`: sampling interval of the point sensors, s (1 Hz by default; a sonic logs
+      at 10-20 Hz: 0.05).
+
+    **Returns:** a `Series`. Raises `ValueError` before compiling for bad inputs.
+    """
+    schedule = schedule_for(scan) if schedule is None else schedule
+    probe = PointProbe() if probe is None else probe
+    _validate(field, scan, mount, np.asarray(heights), None, probe)
+    if not isinstance(schedule, Schedule):
+        raise ValueError(f"simulate_series: `schedule` must be a lidarjax.Schedule, got "
+                         f"{type(schedule).__name__}.")
+    if motion is not None and not isinstance(motion, AbstractMotion):
+        raise ValueError(f"simulate_series: `motion` must be a lidarjax motion (SinusoidalMotion,"
+                         f" SampledMotion), got {type(motion).__name__}.")
+    schedule.check(scan)
+    heights = jnp.atleast_1d(jnp.asarray(heights, dtype=field.dtype))
+    start, duration, n_cycles = _check_span(times, schedule, heights.shape[0])
+    if not point_dt > 0:
+        raise ValueError(f"simulate_series: `point_dt` must be positive seconds, got {point_dt}.")
+    n_points = max(int(np.floor(duration / point_dt + 1e-9)), 1)
+    order = tuple(int(i) for i in schedule.order())
+    return _series_jit(field, scan, mount, heights, jnp.asarray(start, field.dtype), schedule,
+                       probe, motion, jnp.asarray(point_dt, field.dtype),
+                       n_cycles=n_cycles, n_points=n_points, order=order,
+                       duration=float(duration))
+
+
+def _los_times(schedule: Schedule, start, n_cycles: int, n_heights: int, dtype):
+    """``(m, h, b)`` LOS times."""
+    bt = schedule.beam_times.astype(dtype)
+    cycle = schedule.cycle_time(n_heights).astype(dtype)
+    c0 = start + jnp.arange(n_cycles, dtype=dtype) * cycle  # (c,)
+    if not schedule.heights_sequential:
+        t = c0[:, None, None] + bt[None, None, :]
+        return jnp.broadcast_to(t, (n_cycles, n_heights, bt.shape[0]))
+    rot = schedule.rotations_per_height
+    visit = rot * schedule.period.astype(dtype) + schedule.refocus.astype(dtype)
+    k = jnp.arange(n_heights, dtype=dtype)
+    r = jnp.arange(rot, dtype=dtype)
+    t = (c0[:, None, None, None] + r[None, :, None, None] * schedule.period.astype(dtype)
+         + k[None, None, :, None] * visit + bt[None, None, None, :])  # (c, r, h, b)
+    return t.reshape(n_cycles * rot, n_heights, bt.shape[0])
+
+
+def _mount_at(mount: Mount, attitude):
+    """The mount turned by a motion's attitude ``(pitch, roll, yaw)`` in degrees."""
+    pitch, roll, yaw = attitude[0], attitude[1], attitude[2]
+    return eqx.tree_at(lambda m: (m.gamma, m.pitch, m.roll), mount,
+                       (mount.gamma + yaw, mount.pitch + pitch, mount.roll + roll))
+
+
+def _geometry(scan: Scan, mount: Mount):
+    """Beam unit vectors ``(b, 3)`` in the CFD frame (tilt included) and the focus range per
+    metre of height ``(b,)`` (``1 / cos(cone)`` in the body frame: the instrument assumes it is
+    level), as in `lidarjax.simulate`."""
+    n_body = scan.directions()
+    return rotate(body_to_cfd_rotation(mount), n_body), 1.0 / n_body[:, 2]
+
+
+def _to_north(scan: Scan, mount: Mount, v_lidar):
+    """Body-frame reconstruction to the north frame: the software north rotation, after the
+    tilt when the scan compensates it (as `lidarjax.simulate`)."""
+    to_north = lidar_to_north_rotation(mount)
+    if scan.tilt_compensation:
+        to_north = to_north @ tilt_rotation(mount.pitch, mount.roll)
+    return rotate(to_north, v_lidar)
+
+
+def _series(field, scan, mount, heights, start, schedule, probe, motion, point_dt, *,
+            n_cycles, n_points, order, duration):
+    dtype = field.dtype
+    cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
+    scan = jax.tree_util.tree_map(cast, scan)
+    mount_d = jax.tree_util.tree_map(cast, mount)
+    origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo, dtype)
+    h = heights.shape[0]
+    b = scan.n_beams
+    t_los = _los_times(schedule, start, n_cycles, h, dtype)  # (m, h, b)
+    m = t_los.shape[0]
+    beam = jnp.broadcast_to(jnp.arange(b), t_los.shape)
+    hgt = jnp.broadcast_to(heights[None, :, None], t_los.shape)
+    to_cfd_rest = lidar_to_cfd_rotation(mount_d)
+
+    def one(t, j, z):
+        """One LOS of a moving lidar: its own mount, position and velocity at time t."""
+        off, vel, att = motion.state(t)
+        mt = _mount_at(mount_d, att.astype(dtype))
+        offset = rotate(to_cfd_rest, off.astype(dtype))
+        v_lidar = rotate(to_cfd_rest, vel.astype(dtype))
+        n_cfd, per_height = _geometry(scan, mt)
+        n = n_cfd[j]
+        rng = (z * per_height[j]).reshape(1, 1)
+        frozen = _AtTime(field.origin, field.origin_lo, field, t)
+        los, _ = _beam_los(frozen, origin_local + offset, n[None, :], rng, probe)
+        return los[0, 0] - jnp.dot(n, v_lidar)
+
+    if motion is None:
+        # a fixed lidar: one geometry, every cycle's (h, b) LOS at their own times at once
+        n_cfd, per_height = _geometry(scan, mount_d)
+        ranges = heights[:, None] * per_height[None, :]
+
+        def cycle(t_hb):
+            frozen = _AtTime(field.origin, field.origin_lo, field, t_hb)
+            return _beam_los(frozen, origin_local, n_cfd, ranges, probe)[0]
+
+        los = jax.vmap(cycle)(t_los)
+    else:
+        los = jax.vmap(one)(t_los.reshape(-1), beam.reshape(-1), hgt.reshape(-1)).reshape(m, h, b)
+
+    # reconstructions, as the instrument builds them
+    if schedule.update == "each_los":
+        cyc, last = _window_index(np.asarray(order), m)
+        cols = jnp.arange(b)
+        los_w = los[jnp.asarray(cyc), :, cols[None, :]]  # (n, b, h)
+        los_w = jnp.swapaxes(los_w, 1, 2)  # (n, h, b)
+        last_cycle = cyc[np.arange(cyc.shape[0]), last]
+        t_rec = t_los[jnp.asarray(last_cycle), :, jnp.asarray(last)]  # (n, h)
+    else:
+        rot = schedule.rotations_per_height if schedule.heights_sequential else 1
+        los_w = jnp.mean(los.reshape(m // rot, rot, h, b), axis=1)
+        t_rec = jnp.max(t_los.reshape(m // rot, rot, h, b), axis=(1, 3))
+    ok = jnp.all(jnp.isfinite(los_w), axis=-1)
+    v_lidar = reconstruct(scan, jnp.where(jnp.isfinite(los_w), los_w, 0))
+    if motion is None:
+        v_north = _to_north(scan, mount_d, v_lidar)
+    else:
+        _, _, att = motion.state(t_rec)  # (n, h, 3)
+        v_north = jax.vmap(jax.vmap(lambda a, v: _to_north(scan, _mount_at(mount_d, a.astype(dtype)),
+                                                           v)))(att, v_lidar)
+    velocity = jnp.where(ok[..., None], v_north, jnp.nan)
+
+    # point sensors above the lidar's location at rest
+    t_pt = start + jnp.arange(n_points, dtype=dtype) * point_dt
+    zhat = jnp.array([0.0, 0.0, 1.0], dtype)
+    pts = origin_local + heights[:, None] * zhat  # (h, 3)
+    v_pt = jax.vmap(lambda t: field.sample_local_at(pts, t))(t_pt)  # (p, h, 3)
+    v_pt = rotate(cfd_to_north_rotation(mount_d), v_pt)
+    return Series(heights=heights, los_time=t_los, los=los, time=t_rec, velocity=velocity,
+                  point_time=t_pt, point_velocity=v_pt, start=start,
+                  duration=jnp.asarray(duration, dtype))
+
+
+_series_jit = jax.jit(_series, static_argnames=("n_cycles", "n_points", "order", "duration"))
+
+
+class SeriesStatistics(eqx.Module):
+    """Statistics per record and height (`statistics`); every field ``(r, h)``.
+
+    Lidar, as a ``.sta`` reports them (from the valid reconstructions in the record):
+
+    - `speed`: scalar mean of the per-reconstruction horizontal speeds, m/s;
+    - `direction`: direction of the vector mean of the horizontal wind, degrees
+      (meteorological);
+    - `speed_std`, `speed_min`, `speed_max`: standard deviation (population, ``1/N``),
+      minimum and maximum of the horizontal speed, m/s;
+    - `w`, `w_std`: mean and standard deviation of the vertical wind, m/s;
+    - `availability`: percent of the record's reconstructions that are valid (finite: a
+      simulation has no CNR threshold, only beams outside the field are lost);
+    - `ti`: ``speed_std / speed``.
+
+    Point sensors directly above the lidar, sampled every `point_dt`:
+
+    - cup: `cup_speed` (scalar mean of horizontal speed), `cup_std`, `cup_ti`;
+    - sonic (vector): `sonic_speed` (horizontal speed of the vector mean), `sonic_direction`,
+      `sonic_std` (std of the component along the mean direction, the longitudinal
+      ``sigma_u``), `sonic_ti` = ``sonic_std / sonic_speed``, `sonic_w`, `sonic_w_std`.
+    """
+
+    speed: Float[Array, "r h"]
+    direction: Float[Array, "r h"]
+    speed_std: Float[Array, "r h"]
+    speed_min: Float[Array, "r h"]
+    speed_max: Float[Array, "r h"]
+    w: Float[Array, "r h"]
+    w_std: Float[Array, "r h"]
+    availability: Float[Array, "r h"]
+    ti: Float[Array, "r h"]
+    cup_speed: Float[Array, "r h"]
+    cup_std: Float[Array, "r h"]
+    cup_ti: Float[Array, "r h"]
+    sonic_speed: Float[Array, "r h"]
+    sonic_direction: Float[Array, "r h"]
+    sonic_std: Float[Array, "r h"]
+    sonic_ti: Float[Array, "r h"]
+    sonic_w: Float[Array, "r h"]
+    sonic_w_std: Float[Array, "r h"]
+
+
+def _masked_stats(x, mask, axis):
+    n = jnp.sum(mask, axis=axis)
+    nn = jnp.where(n > 0, n, 1)
+    xs = jnp.where(mask, x, 0)
+    mean = jnp.sum(xs, axis=axis) / nn
+    var = jnp.sum(jnp.where(mask, (x - jnp.expand_dims(mean, axis)) ** 2, 0), axis=axis) / nn
+    empty = n == 0
+    std = jnp.sqrt(jnp.where(var > 0, var, 0)) * jnp.where(var > 0, 1, 0)
+    nan = jnp.nan
+    return jnp.where(empty, nan, mean), jnp.where(empty, nan, std), n
+
+
+def statistics(series: Series, starts: Float[ArrayLike, " r"] | None = None,
+               record_length: float = RECORD_LENGTH) -> SeriesStatistics:
+    """Reduce a `Series` to per-record statistics (`SeriesStatistics`).
+
+    A record holds the reconstructions (and point samples) whose time lies in
+    ``[start, start + record_length)``. Without `starts`, the whole series is one record.
+    Pure and jit-compiled (`starts` and `record_length` are dynamic; shapes follow the
+    number of records).
+    """
+    dtype = series.velocity.dtype
+    if starts is None:
+        starts = series.start[None]
+        record_length = series.duration + 1e-6
+    starts = jnp.atleast_1d(jnp.asarray(starts, dtype))
+    return _statistics_jit(series, starts, jnp.asarray(record_length, dtype))
+
+
+def _statistics(series: Series, starts, record_length) -> SeriesStatistics:
+    dtype = series.velocity.dtype
+
+    def one(s):
+        t = series.time  # (n, h)
+        inside = (t >= s) & (t < s + record_length)
+        v = series.velocity
+        ok = inside & jnp.all(jnp.isfinite(v), axis=-1)
+        vs = jnp.where(ok[..., None], v, 0)
+        spd = horizontal_speed(vs)
+        speed, speed_std, n_ok = _masked_stats(spd, ok, 0)
+        w, w_std, _ = _masked_stats(vs[..., 2], ok, 0)
+        mean_vec = jnp.sum(vs, axis=0) / jnp.where(n_ok > 0, n_ok, 1)[:, None]
+        direction = jnp.where(n_ok > 0, wind_direction(mean_vec), jnp.nan)
+        big = jnp.asarray(jnp.inf, dtype)
+        smin = jnp.where(n_ok > 0, jnp.min(jnp.where(ok, spd, big), axis=0), jnp.nan)
+        smax = jnp.where(n_ok > 0, jnp.max(jnp.where(ok, spd, -big), axis=0), jnp.nan)
+        n_in = jnp.sum(inside, axis=0)
+        avail = 100.0 * n_ok / jnp.where(n_in > 0, n_in, 1)
+        ti = speed_std / speed
+
+        tp = series.point_time
+        pin = (tp >= s) & (tp < s + record_length)
+        vp = series.point_velocity
+        pok = pin[:, None] & jnp.all(jnp.isfinite(vp), axis=-1)
+        vps = jnp.where(pok[..., None], vp, 0)
+        cup, cup_std, npk = _masked_stats(horizontal_speed(vps), pok, 0)
+        vmean = jnp.sum(vps, axis=0) / jnp.where(npk > 0, npk, 1)[:, None]
+        sonic_speed = jnp.where(npk > 0, horizontal_speed(vmean), jnp.nan)
+        sonic_dir = jnp.where(npk > 0, wind_direction(vmean), jnp.nan)
+        unit = vmean[:, :2] / jnp.where(sonic_speed > 0, sonic_speed, 1)[:, None]
+        along = jnp.sum(vps[..., :2] * unit, axis=-1)
+        _, sonic_std, _ = _masked_stats(along, pok, 0)
+        sw, sw_std, _ = _masked_stats(vps[..., 2], pok, 0)
+        return SeriesStatistics(
+            speed=speed, direction=direction, speed_std=speed_std, speed_min=smin,
+            speed_max=smax, w=w, w_std=w_std, availability=avail, ti=ti,
+            cup_speed=cup, cup_std=cup_std, cup_ti=cup_std / cup, sonic_speed=sonic_speed,
+            sonic_direction=sonic_dir, sonic_std=sonic_std, sonic_ti=sonic_std / sonic_speed,
+            sonic_w=sw, sonic_w_std=sw_std)
+
+    return jax.vmap(one)(starts)
+
+
+_statistics_jit = jax.jit(_statistics)
+
+
+def simulate_statistics(
+    field: AbstractField,
+    scan: Scan,
+    mount: Mount,
+    heights: Float[ArrayLike, " h"],
+    starts: Float[ArrayLike, " r"],
+    *,
+    record_length: float = RECORD_LENGTH,
+    schedule: Schedule | None = None,
+    probe: AbstractProbe | None = None,
+    motion: AbstractMotion | None = None,
+    point_dt: float = 1.0,
+    ensemble: bool = False,
+    chunk: int = 64,
+    shard: bool = True,
+) -> SeriesStatistics:
+    """Statistics of many records, streamed: each record is simulated and reduced to its
+    statistics inside one compiled function, so no raw LOS outlives its chunk.
+
+    Each record is simulated on its own from its start: its first reconstruction needs one
+    full cycle, so a sliding Windcube record holds ``n_los - b + 1`` vectors (V2: 596 of the
+    instrument's 600; the few windows straddling the previous record are not rebuilt).
+
+    **Arguments:** as `simulate_series`, plus
+
+    - `starts`: ``(r,)`` record start times, s (each record spans `record_length`);
+    - `ensemble`: `field` is a stack of ``e`` fields (`lidarjax.stack_fields`: every array
+      leaf has a leading axis ``e``); the result gets a leading ``e`` axis;
+    - `chunk`: records per compiled batch (vmapped); memory grows with ``chunk`` (and ``e``),
+      not with ``r``;
+    - `shard`: spread each chunk's records over all local devices (`jax.sharding`,
+      a 1-D mesh over `jax.devices()`); the chunk is padded to a multiple of the device
+      count. One device: no sharding.
+
+    **Returns:** `SeriesStatistics` with fields ``(r, h)`` (``(e, r, h)`` for an ensemble),
+    numpy arrays on the host.
+
+    **Float32 and long spans.** Times are in the field's dtype; a float32 time ``t`` resolves
+    ``ulp(t)`` (2 s at a year). A field with an ``advanced(time)`` method
+    (`lidarjax.scenes.FrozenTurbulence`, reduced in float64 on the host) is advanced to each
+    chunk's first start and sampled at times relative to it, so any span keeps the resolution
+    of one chunk (``chunk * record_length``; 0.004 s for 64 records). With a motion or an
+    ensemble, times stay absolute: use float64 (x64) for spans beyond about a day in float32.
+    """
+    schedule = schedule_for(scan) if schedule is None else schedule
+    probe = PointProbe() if probe is None else probe
+    starts = np.atleast_1d(np.asarray(starts, dtype=np.float64))
+    if starts.ndim != 1 or starts.size == 0 or not np.all(np.isfinite(starts)):
+        raise ValueError("simulate_statistics: `starts` must be a non-empty 1-D array of seconds.")
+    if not isinstance(schedule, Schedule):
+        raise ValueError("simulate_statistics: `schedule` must be a lidarjax.Schedule.")
+    schedule.check(scan)
+    probe_field = jax.tree_util.tree_map(lambda a: a[0], field) if ensemble else field
+    _validate(probe_field, scan, mount, np.asarray(heights), None, probe)
+    dtype = probe_field.dtype
+    heights = jnp.atleast_1d(jnp.asarray(heights, dtype=dtype))
+    _, duration, n_cycles = _check_span((0.0, record_length), schedule, heights.shape[0])
+    n_points = max(int(np.floor(duration / point_dt + 1e-9)), 1)
+    order = tuple(int(i) for i in schedule.order())
+    fn = _record_stats_fn(n_cycles, n_points, order, float(record_length), ensemble)
+    devices = jax.devices()
+    n_dev = len(devices) if shard else 1
+    chunk = max(int(chunk), 1)
+    chunk = -(-chunk // n_dev) * n_dev
+    sharding = None
+    if n_dev > 1:
+        mesh = jax.sharding.Mesh(np.asarray(devices), ("records",))
+        sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("records"))
+    # Float32 times far from 0 are coarse (ulp(3e7 s) = 2 s). A field that can move its own
+    # clock on the host in float64 (`FrozenTurbulence.advanced`) is advanced to each chunk's
+    # first start and sees times relative to it (a chunk spans chunk * record_length).
+    rebase = motion is None and not ensemble and hasattr(field, "advanced")
+    out = []
+    for i in range(0, starts.size, chunk):
+        part = starts[i:i + chunk]
+        pad = np.concatenate([part, np.full(chunk - part.size, part[-1])])
+        base = float(part[0]) if rebase else 0.0
+        f_chunk = field.advanced(base) if rebase else field
+        s = jnp.asarray(pad - base, dtype)
+        if sharding is not None:
+            s = jax.device_put(s, sharding)
+        res = fn(f_chunk, scan, mount, heights, s, schedule, probe, motion,
+                 jnp.asarray(point_dt, dtype))
+        out.append(jax.tree_util.tree_map(lambda a, k=part.size: np.asarray(a)[..., :k, :], res))
+    return jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=-2), *out)
+
+
+_STATS_CACHE: dict = {}
+
+
+def _record_stats_fn(n_cycles, n_points, order, record_length, ensemble):
+    """The compiled per-chunk function (one per static configuration)."""
+    key = (n_cycles, n_points, order, record_length, ensemble)
+    if key in _STATS_CACHE:
+        return _STATS_CACHE[key]
+
+    def one_record(field, scan, mount, heights, start, schedule, probe, motion, point_dt):
+        series = _series(field, scan, mount, heights, start, schedule, probe, motion, point_dt,
+                         n_cycles=n_cycles, n_points=n_points, order=order,
+                         duration=record_length)
+        st = _statistics(series, start[None], jnp.asarray(record_length, heights.dtype))
+        return jax.tree_util.tree_map(lambda a: a[0], st)
+
+    over_records = jax.vmap(one_record, in_axes=(None, None, None, None, 0, None, None, None, None))
+    if ensemble:
+        over_records = jax.vmap(over_records,
+                                in_axes=(0, None, None, None, None, None, None, None, None))
+    fn = jax.jit(over_records)
+    _STATS_CACHE[key] = fn
+    return fn
+
+
+def write_series_sta(path, stats: SeriesStatistics, heights, record_ends, *,
+                     scan: Scan | None = None, direction_offset: float = 0.0,
+                     system: str = "lidarjax simulated series"):
+    """Write `SeriesStatistics` ``(r, h)`` as a Windcube ``.sta`` (`lidarjax.io.write_sta`).
+
+    `record_ends`: ``(r,)`` datetime64 (end of each 10-minute interval, as ``.sta`` stamps
+    them). Writes speed, dispersion, min, max, direction, Z-wind, its dispersion and
+    availability. Returns the path written."""
+    from .io import write_sta
+
+    return write_sta(path, np.asarray(record_ends, dtype="datetime64[s]"), np.asarray(heights),
+                     np.asarray(stats.speed), np.asarray(stats.direction), w=np.asarray(stats.w),
+                     speed_std=np.asarray(stats.speed_std), availability=np.asarray(stats.availability),
+                     speed_min=np.asarray(stats.speed_min), speed_max=np.asarray(stats.speed_max),
+                     w_std=np.asarray(stats.w_std),
+                     scan_angle=None if scan is None else float(scan.cone_angle),
+                     direction_offset=direction_offset, system=system)
+
+
+
+_STAT_UNITS = {"speed": "m/s", "direction": "deg", "speed_std": "m/s", "speed_min": "m/s",
+               "speed_max": "m/s", "w": "m/s", "w_std": "m/s", "availability": "%", "ti": "-",
+               "cup_speed": "m/s", "cup_std": "m/s", "cup_ti": "-", "sonic_speed": "m/s",
+               "sonic_direction": "deg", "sonic_std": "m/s", "sonic_ti": "-", "sonic_w": "m/s",
+               "sonic_w_std": "m/s"}
+
+
+def write_series_report(out, stats: SeriesStatistics, heights, starts, *, start_datetime,
+                        scan: Scan | None = None, metadata: dict | None = None,
+                        plots: bool = True, label: str = "lidar") -> dict:
+    """Write a simulated series' statistics under folder `out`:
+
+    - ``series.sta``: the ``.sta`` (`write_series_sta`), stamped at the end of each record
+      from `start_datetime` (numpy datetime64 of time 0) plus `starts` (s) + 600 s;
+    - ``series_statistics.csv``: every `SeriesStatistics` field per record and height
+      (`record_end` in seconds after `start_datetime`);
+    - ``series_ti.png``: lidar against point TI per height (needs matplotlib; skipped with a
+      note in the returned dict when absent, or with ``plots=False``).
+
+    Returns ``{"sta": path, "csv": path, "plot": path or None, "note": text}``."""
+    from pathlib import Path
+
+    from .io import write_table_csv
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    starts = np.asarray(starts, float)
+    heights = np.asarray(heights, float)
+    t0 = np.datetime64(start_datetime, "s")
+    ends = t0 + np.round((starts + RECORD_LENGTH) * 1000).astype("timedelta64[ms]")
+    sta = write_series_sta(out / "series.sta", stats, heights, ends.astype("datetime64[s]"),
+                           scan=scan)
+    r, h = np.asarray(stats.speed).shape
+    cols = {"record_end": np.repeat(starts + RECORD_LENGTH, h), "height": np.tile(heights, r)}
+    units = {"record_end": f"s after {t0}", "height": "m"}
+    for name, unit in _STAT_UNITS.items():
+        cols[name] = np.asarray(getattr(stats, name), float).reshape(-1)
+        units[name] = unit
+    csv = write_table_csv(out / "series_statistics.csv", cols, units, metadata or {})
+    result = {"sta": sta, "csv": csv, "plot": None, "note": ""}
+    if plots:
+        try:
+            from .plots import plot_series_ti
+
+            result["plot"] = plot_series_ti(heights, stats.ti, stats.cup_ti, stats.sonic_ti,
+                                            out / "series_ti.png", label=label)
+        except ImportError as err:
+            result["note"] = f"no figure: {err}"
+    return result
