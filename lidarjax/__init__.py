@@ -40,6 +40,10 @@ from .scan import reconstruct as reconstruct
 from .scan import windcube_v1 as windcube_v1
 from .scan import windcube_v2 as windcube_v2
 from .scan import zephir as zephir
+from .sensitivity import Budget as Budget
+from .sensitivity import Sensitivity as Sensitivity
+from .sensitivity import sensitivity as sensitivity
+from .sensitivity import uncertainty as uncertainty
 
 try:
     __version__ = importlib.metadata.version("lidarjax")

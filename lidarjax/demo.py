@@ -209,6 +209,12 @@ def run_demo(out: Path, *, plots: bool = True, log=print) -> dict:
     log(f"[{time.perf_counter() - t0:5.1f} s] corrected {len(times)} synthetic records x {NH} "
         f"heights from {out / 'synthetic.sta'} -> {out / 'synthetic_corrected.csv'}")
 
+    summary["sensitivity"] = run_sensitivity(out / "sensitivity", plots=plots)
+    log(f"[{time.perf_counter() - t0:5.1f} s] installation uncertainty budget (V2, 12 platform "
+        f"rotations, one batch): u(U) <= {summary['sensitivity']['lidar_speed']:.3g} m/s, "
+        f"u(direction) <= {summary['sensitivity']['lidar_direction']:.3g} deg, u(C_U) <= "
+        f"{summary['sensitivity']['cff_U']:.3g} -> {out / 'sensitivity'}")
+
     if plots:
         try:
             summary["plots"] = [str(p) for p in _plots(out / "plots", result, sims, table)]
@@ -249,3 +255,49 @@ def _plots(folder: Path, result: DemoResult, sims: dict, table):
                                   folder / "sensitivity.png",
                                   title="d(U_V2 - U_free)/dV at h = 20 m, beta = 0, pulsed probe"))
     return paths
+
+
+#: Installation standard uncertainties of the demo's budget (degrees, metres).
+DEMO_STD = {"epsilon": 0.5, "gamma": 0.5, "pitch": 0.2, "roll": 0.2, "location": 0.05}
+
+
+def run_sensitivity(out: Path, *, plots: bool = True) -> dict:
+    """The Windcube V2's installation uncertainty budget for the 12 platform rotations in one
+    compiled batch (`lidarjax.uncertainty`, pulsed probe, `DEMO_STD`): writes one CSV per
+    output and, with matplotlib, budget bars and sensitivity profiles. Returns the largest
+    standard uncertainty of each output over rotations and heights."""
+    from .io import write_table_csv
+    from .sensitivity import OUTPUTS, budget_columns, uncertainty
+
+    outputs = ("lidar_speed", "lidar_direction", "cff_U", "cff_th")
+    mounts = jax.vmap(mount_for)(jnp.asarray(BETAS))
+    budget = uncertainty(scene(), windcube_v2(), mounts, heights(), std=DEMO_STD, u_ref=U_REF,
+                         probe=PulsedProbe(), outputs=outputs)
+    budget = jax.tree_util.tree_map(np.asarray, budget)
+    z_over_h = (DECK[2] + heights()) / RADIUS
+    meta = {"scene": "hemisphere R=20 m, demo", "scan": "windcube_v2", "probe": "PulsedProbe()",
+            "std": ";".join(f"{k}={v}" for k, v in DEMO_STD.items())}
+    out.mkdir(parents=True, exist_ok=True)
+    for o in outputs:
+        cols, units = budget_columns(budget, o, BETAS, z_over_h)
+        write_table_csv(out / f"budget_{o}.csv", cols, units, meta)
+    if plots:
+        try:
+            from .plots import plot_budget, plot_sensitivity_profiles
+
+            k = int(np.nanargmax(np.nanmax(budget.std["lidar_speed"], axis=-1)))
+            rows = np.arange(0, NH, 3)
+            plot_budget(z_over_h[rows], budget.inputs,
+                        {o: budget.contribution[o][k][rows] for o in outputs},
+                        {o: budget.std[o][k][rows] for o in outputs},
+                        {o: OUTPUTS[o] for o in outputs}, out / "budget.png",
+                        title=f"Windcube V2 installation budget, beta = {BETAS[k]:g} deg")
+            plot_sensitivity_profiles(
+                z_over_h, budget.inputs, {o: budget.jacobian[o] for o in outputs},
+                {(o, n): f"{OUTPUTS[o]} per {u}" for o in outputs
+                 for n, u in zip(budget.inputs, budget.input_units, strict=True)},
+                out / "sensitivity_profiles.png",
+                title="Windcube V2 sensitivities, hemisphere platform, 12 rotations")
+        except ImportError:
+            pass
+    return {o: float(np.nanmax(budget.std[o])) for o in outputs}

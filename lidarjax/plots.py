@@ -12,7 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["plot_profiles", "plot_los_fit", "plot_roses", "plot_sensitivity", "sensitivity_map"]
+__all__ = ["plot_profiles", "plot_los_fit", "plot_roses", "plot_sensitivity", "sensitivity_map",
+           "plot_budget", "plot_sensitivity_profiles"]
 
 _COLOURS = {"point": "k", "windcube_v1": "C0", "windcube_v2": "C1", "zephir": "C2"}
 _LABELS = {"point": "point above the lidar", "windcube_v1": "Windcube V1",
@@ -165,4 +166,74 @@ def plot_sensitivity(field, sensitivity, mount_location, height, path, *, title=
     ax2.set_title("summed over y")
     fig.colorbar(m2, ax=ax2)
     fig.suptitle(title or "where the flow drives the lidar's speed error")
+    return _save(fig, path)
+
+
+def plot_budget(z_over_h, inputs, contributions: dict, std: dict, units: dict, path, *,
+                title=None) -> Path:
+    """Uncertainty budget bars per height: each input's contribution ``|c_i| u_i`` (one bar
+    per input, log scale) and the combined standard uncertainty (black tick), one panel per
+    output.
+
+    **Arguments:** `z_over_h` ``(h,)``; `inputs` ``(p,)`` names; `contributions` maps an
+    output name to ``(h, p)`` and `std` to ``(h,)`` (one sector; e.g. the largest over
+    sectors), in the output's unit (`units[output]`).
+    """
+    plt = _pyplot()
+    outs = list(contributions)
+    p = len(inputs)
+    fig, axes = plt.subplots(1, len(outs), figsize=(3.6 * len(outs) + 1.0, 0.32 * p *
+                                                    len(z_over_h) ** 0.5 + 3.0), sharey=True,
+                             squeeze=False)
+    y = np.arange(len(z_over_h), dtype=float)
+    width = 0.8 / p
+    for ax, o in zip(axes[0], outs, strict=True):
+        c = np.asarray(contributions[o], dtype=float)
+        u = np.asarray(std[o], dtype=float)
+        floor = max(np.nanmax(u), 1e-300) * 1e-6
+        for i, name in enumerate(inputs):
+            ax.barh(y - 0.4 + (i + 0.5) * width, np.maximum(c[:, i], floor), height=width,
+                    color=f"C{i % 10}", label=name, left=0)
+        ax.plot(u, y, "k|", ms=14, mew=2, label="combined u")
+        ax.set_xscale("log")
+        ax.set_xlim(left=floor * 10)
+        ax.set_xlabel(f"{o} ({units[o]})")
+        ax.grid(alpha=0.3, axis="x")
+    axes[0][0].set_yticks(y)
+    axes[0][0].set_yticklabels([f"{v:.2f}" for v in np.asarray(z_over_h)])
+    axes[0][0].set_ylabel("z / H")
+    axes[0][-1].legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=8)
+    fig.suptitle(title or "standard uncertainty contributions |c_i| u(x_i) per height")
+    return _save(fig, path)
+
+
+def plot_sensitivity_profiles(z_over_h, inputs, jacobian: dict, units: dict, path, *,
+                              title=None) -> Path:
+    """Sensitivity coefficients ``d output / d input`` against z / H: one row per output,
+    one column per input; the line is the mean over sectors, the band their range.
+
+    **Arguments:** `z_over_h` ``(h,)``; `inputs` ``(p,)`` names; `jacobian` maps an output to
+    ``(s, h, p)``; `units` maps ``(output, input)`` to the unit text ('m/s per deg').
+    """
+    plt = _pyplot()
+    outs = list(jacobian)
+    p = len(inputs)
+    fig, axes = plt.subplots(len(outs), p, figsize=(2.3 * p + 0.6, 2.2 * len(outs) + 0.6),
+                             sharey=True, squeeze=False)
+    z = np.asarray(z_over_h)
+    for r, o in enumerate(outs):
+        j = np.asarray(jacobian[o], dtype=float)
+        for i, name in enumerate(inputs):
+            ax = axes[r][i]
+            ji = j[..., i]
+            ax.plot(np.nanmean(ji, 0), z, "-o", ms=3, color=f"C{r}")
+            ax.fill_betweenx(z, np.nanmin(ji, 0), np.nanmax(ji, 0), color=f"C{r}", alpha=0.15)
+            ax.axvline(0.0, color="0.6", lw=0.8)
+            ax.set_title(f"d {o} / d {name}", fontsize=8)
+            ax.set_xlabel(units[(o, name)], fontsize=7)
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+        axes[r][0].set_ylabel("z / H")
+    fig.suptitle(title or "sensitivity profiles (mean over sectors, band: range)")
+    fig.tight_layout()
     return _save(fig, path)

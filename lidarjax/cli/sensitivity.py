@@ -1,0 +1,169 @@
+"""`lidarjax sensitivity`: installation uncertainty budgets of a seed settings.dat's lidar,
+for every platform rotation in one compiled batch."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from ._common import add_run_arguments, field_paths, make_probe
+
+DEFAULT_OUTPUTS = "lidar_speed,lidar_direction,cff_U,cff_th"
+
+
+def register(sub) -> None:
+    sen = sub.add_parser(
+        "sensitivity", help="uncertainty budgets of the lidar's outputs from installation "
+                            "uncertainties (GUM through exact gradients)",
+        description="For every platform rotation (beta row) of a seed settings.dat, in one "
+                    "compiled batch: the Jacobians of the lidar's outputs with respect to the "
+                    "installation inputs given with --std, the combined standard uncertainty "
+                    "per height (GUM law of propagation) and each input's contribution. Prints "
+                    "a budget table per beta and height, writes one CSV per output and plots "
+                    "(budget bars per height, sensitivity profiles against z/H).",
+        epilog="example: lidarjax sensitivity settings.dat --field 'runs/platform_{beta}.npz' "
+               "--std epsilon=0.5 --std pitch=0.2 --std roll=0.2 --std location=0.05 "
+               "--out budget/\n\ninputs: location (or x, y, z; m), beta, gamma, psi, epsilon, "
+               "pitch, roll, cone_angle (deg), heights (m), speed (m/s of the free stream)",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    sen.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
+    add_run_arguments(sen, default_scan="windcube_v2")
+    sen.add_argument("--std", action="append", default=[], metavar="NAME=VALUE",
+                     help="standard uncertainty of an input, in its unit (repeatable): e.g. "
+                          "epsilon=0.5 (deg), pitch=0.2 (deg), location=0.05 (m, or three "
+                          "values x,y,z: location=0.05,0.05,0.1)")
+    sen.add_argument("--outputs", default=DEFAULT_OUTPUTS,
+                     help=f"comma-separated outputs (default {DEFAULT_OUTPUTS}); also lidar_u, "
+                          "lidar_v, lidar_w, cff_u, cff_v, cff_w, point_speed, cfp_U, cfp_th")
+    sen.add_argument("--pitch", type=float, default=0.0, help="nominal pitch, deg (default 0)")
+    sen.add_argument("--roll", type=float, default=0.0, help="nominal roll, deg (default 0)")
+    sen.add_argument("--tilt-compensation", action="store_true",
+                     help="the instrument compensates its tilt")
+    sen.add_argument("--n-monte-carlo", type=int, default=0,
+                     help="also a Monte Carlo of N samples per beta to check the linear "
+                          "budget (5000 gives the standard uncertainty to about 1 %%)")
+    sen.add_argument("--ref-height", type=float, default=None,
+                     help="H of z/H, m (default: the lidar's mean z, i.e. its height above "
+                          "the CFD z = 0)")
+    sen.add_argument("--out", default=".", help="output folder (default: .)")
+    sen.add_argument("--no-plots", action="store_true", help="skip the figures")
+    sen.set_defaults(func=run)
+
+
+def parse_std(items) -> dict:
+    """``["epsilon=0.5", "location=0.05,0.05,0.1"]`` -> ``{"epsilon": 0.5, "location":
+    (0.05, 0.05, 0.1)}``; raises `ValueError` (one line) for anything else."""
+    from ..sensitivity import INPUTS
+
+    if not items:
+        raise ValueError("give at least one --std NAME=VALUE (e.g. --std epsilon=0.5)")
+    allowed = sorted(set(INPUTS) - {"direction"} | {"location"})
+    std: dict = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise ValueError(f"--std {item!r}: expected NAME=VALUE, e.g. epsilon=0.5")
+        if name not in allowed:
+            raise ValueError(f"--std {item!r}: unknown input {name!r}; choose from "
+                             f"{', '.join(allowed)}")
+        try:
+            values = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            raise ValueError(f"--std {item!r}: {text!r} is not a number") from None
+        want = 3 if name == "location" else 1
+        if len(values) not in (1, want):
+            raise ValueError(f"--std {item!r}: {name} takes {'1 or 3 values' if want == 3 else 'one value'}")
+        if not all(np.isfinite(v) and v >= 0 for v in values):
+            raise ValueError(f"--std {item!r}: standard uncertainties must be finite and >= 0")
+        if name in std:
+            raise ValueError(f"--std {name} is given twice")
+        std[name] = values[0] if len(values) == 1 else values
+    return std
+
+
+def run(args) -> int:
+    import jax
+    import jax.numpy as jnp
+
+    from ..io import read_settings, write_table_csv
+    from ..io._common import have_module
+    from ..io.fields import load_field
+    from ..io.seed_output import format_number
+    from ..mount import Mount
+    from ..scan import windcube_v1, windcube_v2, zephir
+    from ..sensitivity import OUTPUTS, budget_columns, uncertainty
+
+    std = parse_std(args.std)
+    outputs = tuple(o.strip() for o in args.outputs.split(",") if o.strip())
+    bad = [o for o in outputs if o not in OUTPUTS or o in ("los", "lidar_velocity", "inv_speed",
+                                                           "inv_direction")]
+    if bad or not outputs:
+        raise ValueError(f"--outputs: unknown or not per-height output(s) {bad}; choose from "
+                         f"{DEFAULT_OUTPUTS}, lidar_u, lidar_v, lidar_w, cff_u, cff_v, cff_w, "
+                         f"point_speed, point_direction, cfp_u, cfp_v, cfp_w, cfp_U, cfp_th")
+    if args.n_monte_carlo < 0 or args.n_monte_carlo == 1:
+        raise ValueError(f"--n-monte-carlo must be 0 or at least 2, got {args.n_monte_carlo}")
+    if args.ref_height is not None and not args.ref_height > 0:
+        raise ValueError(f"--ref-height must be positive (m), got {args.ref_height}")
+    for name, v in (("--pitch", args.pitch), ("--roll", args.roll)):
+        if not np.isfinite(v):
+            raise ValueError(f"{name} must be a finite angle in degrees, got {v}")
+    settings = read_settings(args.settings)
+    betas = [float(b) for b in settings.betas]
+    paths = field_paths(args, betas)
+    make = {"windcube_v1": windcube_v1, "windcube_v2": windcube_v2, "zephir": zephir}[args.scan]
+    kw = {"tilt_compensation": bool(args.tilt_compensation)}
+    scan = make(**kw) if args.cone_angle is None else make(args.cone_angle, **kw)
+    probe = make_probe(args)
+    out = __import__("pathlib").Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    mounts = [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
+                    epsilon=settings.epsilon, pitch=args.pitch, roll=args.roll) for b in betas]
+    heights = jnp.asarray(settings.heights())
+    fields = [load_field(paths[b]) for b in betas]
+    budget = uncertainty(fields, scan, mounts, heights, std=std, u_ref=args.u_ref, probe=probe,
+                         outputs=outputs, n_monte_carlo=args.n_monte_carlo)
+    budget = jax.tree_util.tree_map(np.asarray, budget)
+    lidar_z = np.array([float(settings.location(b)[2]) for b in betas])
+    ref = args.ref_height if args.ref_height is not None else float(np.mean(lidar_z))
+    if not ref > 0:
+        ref = float(settings.height)
+    z_over_h = (lidar_z[:, None] + np.asarray(budget.heights)[None]) / ref
+    for k, b in enumerate(betas):
+        print(f"== beta = {b:g} deg ({paths[b].name}) ==")
+        print(budget.table(sector=k))
+        print()
+    meta = {"settings": str(args.settings), "field": args.field, "scan": args.scan,
+            "probe": args.probe, "std": ";".join(f"{k}={v}" for k, v in std.items()),
+            "pitch_deg": args.pitch, "roll_deg": args.roll,
+            "tilt_compensation": bool(args.tilt_compensation), "ref_height_m": ref,
+            "u_ref_cfd_m_s": ",".join(map(str, args.u_ref)),
+            "method": "GUM law of propagation u^2 = J C J^T with exact forward-mode Jacobians"}
+    written = []
+    for o in outputs:
+        cols, units = budget_columns(budget, o, betas, z_over_h)
+        written.append(write_table_csv(out / f"budget_{o}.csv", cols, units, meta))
+    if not args.no_plots and have_module("matplotlib"):
+        from ..plots import plot_budget, plot_sensitivity_profiles
+
+        # the budget figure of the platform rotation with the largest uncertainty
+        k = int(np.nanargmax(np.nanmax(budget.std[outputs[0]], axis=-1)))
+        written.append(plot_budget(
+            z_over_h[k], budget.inputs, {o: budget.contribution[o][k] for o in outputs},
+            {o: budget.std[o][k] for o in outputs}, {o: OUTPUTS[o] for o in outputs},
+            out / "budget.png",
+            title=f"uncertainty budget, beta = {betas[k]:g} deg (largest u({outputs[0]}))"))
+        written.append(plot_sensitivity_profiles(
+            z_over_h.mean(0), budget.inputs, {o: budget.jacobian[o] for o in outputs},
+            {(o, n): f"{OUTPUTS[o]} per {u}" for o in outputs
+             for n, u in zip(budget.inputs, budget.input_units, strict=True)},
+            out / "sensitivity_profiles.png",
+            title=f"sensitivity profiles over {len(betas)} platform rotations"))
+    worst = {o: float(np.nanmax(budget.std[o])) for o in outputs}
+    print("largest standard uncertainty over betas and heights: " + ", ".join(
+        f"{o} {v:.3g} {OUTPUTS[o]}" for o, v in worst.items()))
+    print(f"wrote {len(written)} file(s) to {out} (betas: "
+          f"{', '.join(format_number(b) for b in betas)})")
+    return 0
