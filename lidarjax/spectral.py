@@ -158,13 +158,13 @@ def probe_transfer(probe, kappa, focus_range, *, model: str = "weight"):
         raise ValueError(f"probe_transfer: no closed form for {type(probe).__name__}; use model='nodes'.")
     if model == "truncated":
         x, w = _legendre(2000)
-        half, phi = _truncated_weight(probe, x, r)
+        half, phi = _truncated_weight(probe, x, np.asarray(r))
         o = float(half) * x
         phi = np.asarray(phi, dtype=np.float64) * w
         phi = phi / phi.sum()
         return np.cos(np.multiply.outer(kappa, o)) @ phi
     if model == "nodes":
-        offsets, weights = _nodes(probe, r)
+        offsets, weights = _nodes(probe, np.asarray(r))
         o = np.asarray(offsets, np.float64).reshape(-1)
         wq = np.broadcast_to(np.asarray(weights, np.float64).reshape(-1), o.shape)
         wq = wq / wq.sum()
@@ -213,13 +213,19 @@ def box_variance(shape, spacing, alphaepsilon, length_scale, gamma):
 def reconstruction_coefficients(scan) -> np.ndarray:
     """The ``(3, b)`` matrix ``C`` with ``reconstruct(scan, los) = C @ los`` (every method is
     linear in the LOS), in the lidar frame; float64."""
+    return np.asarray(_scan_matrices(scan)[1], dtype=np.float64)
+
+
+@eqx.filter_jit
+def _scan_matrices(scan):
+    """Beam unit vectors ``(b, 3)`` and reconstruction matrix ``(3, b)`` (one compile per scan
+    structure instead of one per eager operation)."""
     import jax
-    import jax.numpy as jnp
 
     from .scan import reconstruct
 
     zeros = jnp.zeros((scan.n_beams,), dtype=scan.azimuths.dtype)
-    return np.asarray(jax.jacfwd(lambda s: reconstruct(scan, s))(zeros), dtype=np.float64)
+    return scan.directions(), jax.jacfwd(lambda s: reconstruct(scan, s))(zeros)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -268,7 +274,7 @@ def lidar_geometry(scan, height, *, direction=270.0, beam_times=None, component=
     h = float(height)
     if not h > 0:
         raise ValueError(f"lidar_geometry: height must be positive metres, got {height!r}.")
-    n_lidar = np.asarray(scan.directions(), dtype=np.float64)  # (b, 3) lidar frame
+    n_lidar = np.asarray(_scan_matrices(scan)[0], dtype=np.float64)  # (b, 3) lidar frame
     nb = n_lidar.shape[0]
     d = np.deg2rad(float(direction))
     ex = np.array([-np.sin(d), -np.cos(d), 0.0])
