@@ -276,7 +276,8 @@ class OpenFOAMField:
         """The cellPoint interpolant over `cells` (global numbers; default every cell)."""
         if cells is None:
             cells = np.arange(self.mesh.n_cells)
-        return build_sampler(self.mesh, self.cell_values, self.boundary, np.asarray(cells, np.int64))
+        return build_sampler(self.mesh, self.cell_values, self.boundary, np.asarray(cells, np.int64),
+                             self.bounds)
 
     def cells_in_box(self, lo: Any, hi: Any) -> np.ndarray:
         """Global numbers of the cells whose bounding boxes overlap the box `[lo, hi]` (m)."""
