@@ -194,6 +194,8 @@ def _as_vectors(value: Any, n: int, cur: Cursor, what: str) -> np.ndarray:
     if not (isinstance(value, tuple) and len(value) == 2 and value[0] in ("uniform", "nonuniform")):
         raise cur.error(f"{what}: expected 'uniform (x y z)' or 'nonuniform List<vector> N (...)'")
     arr = np.asarray(value[1], dtype=np.float64)
+    if arr.size == 0 and n == 0:
+        return np.zeros((0, 3))
     if value[0] == "uniform":
         if arr.shape != (3,):
             raise cur.error(f"{what}: uniform value must be a vector (x y z), got shape {arr.shape}")
