@@ -41,6 +41,7 @@ __all__ = [
     "openfoam_times",
     "read_openfoam_field",
     "read_openfoam_mesh",
+    "resample_openfoam",
     "sample_openfoam",
 ]
 
