@@ -194,7 +194,10 @@ def _as_vectors(value: Any, n: int, cur: Cursor, what: str) -> np.ndarray:
     """`('uniform', (3,))` or `('nonuniform', (n, 3))` to an `(n, 3)` array."""
     if not (isinstance(value, tuple) and len(value) == 2 and value[0] in ("uniform", "nonuniform")):
         raise cur.error(f"{what}: expected 'uniform (x y z)' or 'nonuniform List<vector> N (...)'")
-    arr = np.asarray(value[1], dtype=np.float64)
+    try:
+        arr = np.asarray(value[1], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise cur.error(f"{what}: not a list of numbers: {str(value[1])[:60]}") from None
     if arr.size == 0 and n == 0:
         return np.zeros((0, 3))
     if value[0] == "uniform":
