@@ -346,3 +346,21 @@ def test_windcube_los_against_openfoam_probes(cut_case):
         assert np.isfinite(d).all()
         assert np.sqrt(np.mean(d ** 2)) < 0.02, lidar
         assert np.abs(d).max() < 0.1, lidar
+
+
+def test_reader_agrees_with_foamlib():
+    """An independent parser (foamlib) reads the same binary mesh and field."""
+    foamlib = pytest.importorskip("foamlib")
+    f = read_openfoam_field(CUT)
+    d = CUT / "constant" / "polyMesh"
+    np.testing.assert_array_equal(foamlib.FoamFile(d / "points")[None], f.mesh.points)
+    np.testing.assert_array_equal(foamlib.FoamFile(d / "owner")[None], f.mesh.owner)
+    np.testing.assert_array_equal(foamlib.FoamFile(d / "neighbour")[None], f.mesh.neighbour)
+    offsets, labels = foamlib.FoamFile(d / "faces")[None]
+    np.testing.assert_array_equal(offsets, f.mesh.face_offsets)
+    np.testing.assert_array_equal(labels, f.mesh.face_labels)
+    u = foamlib.FoamFieldFile(CUT / "168" / "U")
+    np.testing.assert_array_equal(u.internal_field, f.cell_values)
+    terrain = [p for p in f.mesh.patches if p[0] == "terrain"][0]
+    np.testing.assert_array_equal(np.broadcast_to(u.boundary_field["terrain"]["value"], (terrain[3], 3)),
+                                  f.boundary.values["terrain"])
