@@ -183,6 +183,9 @@ def run_child(mode: str, case: str, points: str = "", probes: str = "") -> dict:
 
 
 def main() -> None:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # the exact cell values in float64
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="only the 1e5-cell mesh")
     ap.add_argument("--sizes", type=float, nargs="*", default=None)
