@@ -171,11 +171,15 @@ print("RESULT" + json.dumps(out))
 """
 
 
-def run_child(mode: str, case: str, points: str = "", probes: str = "") -> dict:
+def run_child(mode: str, case: str, points: str = "", probes: str = "", timeout: float | None = None) -> dict:
     code = CHILD.format(root=str(ROOT), mode=mode, case=case, location=LOCATION, heights=HEIGHTS,
                         radius=RADIUS, speed=SPEED, direction=DIRECTION, points=points, probes=probes)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    try:
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                              timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"error": f"not finished after {timeout:g} s (stopped)"}
     line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
     if proc.returncode != 0 or not line:
         return {"error": (proc.stderr or proc.stdout)[-800:]}
@@ -190,6 +194,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="only the 1e5-cell mesh")
     ap.add_argument("--sizes", type=float, nargs="*", default=None)
     ap.add_argument("--old-max", type=float, default=1.5e6, help="largest mesh for the old path")
+    ap.add_argument("--old-timeout", type=float, default=240.0, help="seconds allowed to the old path")
     ap.add_argument("--turbine-case", default="/work/i11a_of/ts")
     ap.add_argument("--turbine-probes", default="/work/i11a_of/ts/postProcessing/probes/168/U")
     args = ap.parse_args()
@@ -205,8 +210,8 @@ def main() -> None:
             meta["write_s"] = time.perf_counter() - t
             meta["bytes"] = sum(f.stat().st_size for f in case.rglob("*") if f.is_file())
             entry = {"target_cells": n, **meta, "new": run_child("new", str(case))}
-            entry["old"] = run_child("old", str(case)) if n <= args.old_max else {"skipped": "Delaunay of "
-                                                                                  "every cell centre"}
+            entry["old"] = (run_child("old", str(case), timeout=args.old_timeout) if n <= args.old_max
+                            else {"skipped": "Delaunay of every cell centre"})
             print(json.dumps(entry), flush=True)
             results["hemisphere"].append(entry)
             for f in case.rglob("*"):
