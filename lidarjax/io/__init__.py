@@ -4,6 +4,7 @@
 - `seed_output`: the seed's output table, its azimuth convention, CSV and NetCDF writers.
 - `sta`, `rtd`: Windcube 10-minute statistics and line-of-sight records.
 - `zephir`: ZephIR 10-minute CSV exports.
+- `probes`: CFD probe files (OpenFOAM probes dictionary and output, zCFD, CSV).
 - `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII) for `lidarjax.GridField`.
 
 Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/write),
@@ -19,6 +20,13 @@ from .fields import read_fluent_points as read_fluent_points
 from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
+from .probes import OpenFoamProbes as OpenFoamProbes
+from .probes import read_openfoam_probes as read_openfoam_probes
+from .probes import read_probe_csv as read_probe_csv
+from .probes import read_probe_values_csv as read_probe_values_csv
+from .probes import write_openfoam_probes as write_openfoam_probes
+from .probes import write_probe_csv as write_probe_csv
+from .probes import write_zcfd_probes as write_zcfd_probes
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord
