@@ -335,7 +335,7 @@ class ProbeField(AbstractField):
         # the most points any window of width 2 * tol holds: a query's match lies at most
         # that many places after the first point within tol of the query's projection
         count = np.searchsorted(sp, sp + 2 * tol, side="right") - np.arange(sp.size)
-        self.window = int(count.max())
+        self.window = max(4, int(count.max()))  # a floor keeps one compiled shape
         self.points_local = jnp.asarray(local.astype(dtype))
         self.velocity = vel
         self.tolerance = jnp.asarray(tol, dtype)
