@@ -1,0 +1,566 @@
+"""Sampling a finite-volume field inside its own polyhedral cells: OpenFOAM's `cellPoint`.
+
+Private to `lidarjax.io` (plain numpy + scipy, no jit). The interpolation is rebuilt from the
+same ingredients as OpenFOAM's `interpolationCellPoint` (what the `probes` function object
+and `sample` use with `interpolationScheme cellPoint`):
+
+1. geometry as `primitiveMesh` computes it: face centre = area-weighted centroid of the fan
+   of triangles (edge, face-point average); face area vector = half the sum of their normals;
+   cell centre = volume-weighted centroid of the face pyramids over the average of the face
+   centres;
+2. point values as `volPointInterpolation`: a point not on a boundary patch takes the
+   inverse-distance weighted mean of the values at the centres of the cells around it
+   (weights `1/|x_p - C_c|`); a point on a boundary patch (not `empty`, not coupled) takes
+   the inverse-distance weighted mean of the boundary *face* values of the patch faces
+   around it (weights `1/|x_p - C_f|`);
+3. each cell cut into tetrahedra (cell centre, the face's tet base point, two consecutive
+   face points: `polyMeshTetDecomposition`, base point = the first face point whose fan of
+   tets has positive quality seen from both cells); a point is located in its tetrahedron
+   and the value is the barycentric mix of the cell-centre value and the three point
+   values.
+
+The result is continuous and piecewise linear; a linear field is reproduced exactly in the
+interior. Points in no cell (inside solids: buildings, below terrain; outside the domain)
+are NaN: nothing is ever interpolated across a solid.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__: list[str] = []
+
+_CHUNK = 2_000_000
+_INSIDE_TOL = 1e-9
+_MIN_TET_QUALITY = 1e-15
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PolyMesh:
+    """An OpenFOAM `polyMesh` as flat arrays (global numbering).
+
+    - `points` `(P, 3)` metres; faces as CSR `face_offsets (F+1,)`, `face_labels (M,)`;
+    - `owner (F,)`, `neighbour (Fi,)` (internal faces first, as in OpenFOAM);
+    - `patches`: `(name, type, startFace, nFaces)` for each boundary patch.
+    """
+
+    points: np.ndarray
+    face_offsets: np.ndarray
+    face_labels: np.ndarray
+    owner: np.ndarray
+    neighbour: np.ndarray
+    n_cells: int
+    patches: tuple[tuple[str, str, int, int], ...]
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.owner.size)
+
+    @property
+    def n_internal(self) -> int:
+        return int(self.neighbour.size)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class BoundaryValues:
+    """Boundary face values of a vector field, per patch: `values[name]` is `(nFaces, 3)`,
+    or a string naming how to derive them from the owner cells (`"cell"` for zero-gradient
+    types, `"slip"` for slip/symmetry: the cell value less its normal component)."""
+
+    values: dict[str, np.ndarray | str]
+
+
+_NOT_PROPER = ("empty", "processor", "processorCyclic", "cyclic", "cyclicAMI", "cyclicACMI",
+               "cyclicSlip", "nonConformalCyclic", "nonConformalProcessorCyclic")
+
+
+def _face_sizes(mesh: PolyMesh, faces: np.ndarray) -> np.ndarray:
+    return mesh.face_offsets[faces + 1] - mesh.face_offsets[faces]
+
+
+def _gather_face_points(mesh: PolyMesh, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat point labels of `faces`, their local offsets, and each label's position in its face."""
+    sizes = _face_sizes(mesh, faces)
+    offs = np.zeros(faces.size + 1, np.int64)
+    np.cumsum(sizes, out=offs[1:])
+    pos_in_face = np.arange(offs[-1], dtype=np.int64) - np.repeat(offs[:-1], sizes)
+    flat = mesh.face_labels[np.repeat(mesh.face_offsets[faces], sizes) + pos_in_face]
+    return flat, offs, pos_in_face
+
+
+def face_geometry(mesh: PolyMesh, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Face centres `(n, 3)` and area vectors `(n, 3)` of `faces`, as `primitiveMesh`."""
+    centres = np.empty((faces.size, 3))
+    areas = np.empty((faces.size, 3))
+    for s in range(0, faces.size, _CHUNK // 4):
+        f = faces[s: s + _CHUNK // 4]
+        flat, offs, pos = _gather_face_points(mesh, f)
+        sizes = np.diff(offs)
+        p = mesh.points[flat]
+        est = np.add.reduceat(p, offs[:-1], axis=0) / sizes[:, None]
+        nxt_pos = np.where(pos + 1 == np.repeat(sizes, sizes), 0, pos + 1)
+        pn = p[np.repeat(offs[:-1], sizes) + nxt_pos]
+        fe = np.repeat(est, sizes, axis=0)
+        c = p + pn + fe
+        n = np.cross(pn - p, fe - p)
+        a = np.linalg.norm(n, axis=1)
+        sum_n = np.add.reduceat(n, offs[:-1], axis=0)
+        sum_a = np.add.reduceat(a, offs[:-1])
+        sum_ac = np.add.reduceat(a[:, None] * c, offs[:-1], axis=0)
+        good = sum_a > 1e-150
+        safe = np.where(good, sum_a, 1.0)
+        centres[s: s + f.size] = np.where(good[:, None], sum_ac / (3.0 * safe[:, None]), est)
+        areas[s: s + f.size] = np.where(good[:, None], 0.5 * sum_n, 0.0)
+    return centres, areas
+
+
+def cell_centres(
+    face_ctr: np.ndarray, face_area: np.ndarray, own: np.ndarray, nei: np.ndarray, n_cells: int,
+) -> np.ndarray:
+    """Cell centres as `primitiveMesh::makeCellCentresAndVols`.
+
+    `own[i]`, `nei[i]`: local cell numbers of face i's two sides (-1 where that side is not
+    one of the `n_cells` cells); every face of every cell must be present."""
+    est = np.zeros((n_cells, 3))
+    count = np.zeros(n_cells)
+    for side in (own, nei):
+        ok = side >= 0
+        for a in range(3):
+            est[:, a] += np.bincount(side[ok], weights=face_ctr[ok, a], minlength=n_cells)
+        count += np.bincount(side[ok], minlength=n_cells)
+    est /= np.maximum(count, 1)[:, None]
+    ctr = np.zeros((n_cells, 3))
+    vol = np.zeros(n_cells)
+    for side, sign in ((own, 1.0), (nei, -1.0)):
+        ok = side >= 0
+        c = side[ok]
+        pyr3 = sign * np.einsum("ij,ij->i", face_area[ok], face_ctr[ok] - est[c])
+        pc = 0.75 * face_ctr[ok] + 0.25 * est[c]
+        for a in range(3):
+            ctr[:, a] += np.bincount(c, weights=pyr3 * pc[:, a], minlength=n_cells)
+        vol += np.bincount(c, weights=pyr3, minlength=n_cells)
+    good = np.abs(vol) > 1e-300
+    ctr = np.where(good[:, None], ctr / np.where(good, vol, 1.0)[:, None], est)
+    return ctr
+
+
+def cell_bounds(mesh: PolyMesh) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned bounding boxes `(lo, hi)`, each `(n_cells, 3)`, of every cell."""
+    lo = np.full((mesh.n_cells, 3), np.inf)
+    hi = np.full((mesh.n_cells, 3), -np.inf)
+    fo = mesh.face_offsets
+    nf = mesh.n_faces
+    step = _CHUNK
+    for s in range(0, nf, step):
+        e = min(nf, s + step)
+        starts = fo[s: e] - fo[s]
+        labels = mesh.face_labels[fo[s]: fo[e]]
+        own = mesh.owner[s:e]
+        nei = mesh.neighbour[s: min(e, mesh.n_internal)]
+        for a in range(3):
+            pa = mesh.points[labels, a]
+            mn = np.minimum.reduceat(pa, starts)
+            mx = np.maximum.reduceat(pa, starts)
+            np.minimum.at(lo[:, a], own, mn)
+            np.maximum.at(hi[:, a], own, mx)
+            if nei.size:
+                np.minimum.at(lo[:, a], nei, mn[: nei.size])
+                np.maximum.at(hi[:, a], nei, mx[: nei.size])
+    return lo, hi
+
+
+def _faces_touching(mesh: PolyMesh, point_mask: np.ndarray) -> np.ndarray:
+    """Indices of faces with at least one point in `point_mask`."""
+    out = []
+    fo = mesh.face_offsets
+    for s in range(0, mesh.n_faces, _CHUNK):
+        e = min(mesh.n_faces, s + _CHUNK)
+        hit = np.logical_or.reduceat(point_mask[mesh.face_labels[fo[s]: fo[e]]], fo[s:e] - fo[s])
+        out.append(np.flatnonzero(hit) + s)
+    return np.concatenate(out) if out else np.zeros(0, np.int64)
+
+
+def _faces_of_cells(mesh: PolyMesh, cell_mask: np.ndarray) -> np.ndarray:
+    hit = cell_mask[mesh.owner].copy()
+    hit[: mesh.n_internal] |= cell_mask[mesh.neighbour]
+    return np.flatnonzero(hit)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class CellPointSampler:
+    """The cellPoint interpolant restricted to a set of cells.
+
+    Tetrahedra `(n_tets,)`: `tet_cell` (local cell), `tet_pts (n_tets, 3)` (local point
+    numbers of base, A, B), inverse edge matrices `tet_inv (n_tets, 3, 3)` for barycentric
+    coordinates relative to the cell centre; `cell_centre (nc, 3)`, `cell_value (nc, 3)`;
+    `point_xyz (np, 3)`, `point_value (np, 3)`; `cell_tets`: CSR of tets per local cell.
+    """
+
+    cell_centre: np.ndarray
+    cell_value: np.ndarray
+    cell_size: np.ndarray  # (nc, 3) bounding-box extent per axis
+    cell_lo: np.ndarray
+    cell_hi: np.ndarray
+    point_xyz: np.ndarray
+    point_value: np.ndarray
+    tet_cell: np.ndarray
+    tet_pts: np.ndarray
+    tet_inv: np.ndarray
+    tet_ok: np.ndarray
+    cell_tet_offsets: np.ndarray
+    n_cells_total: int
+    n_boundary_points: int
+
+    @property
+    def n_cells(self) -> int:
+        return int(self.cell_centre.shape[0])
+
+    # -- evaluation ------------------------------------------------------------------
+    def _bary(self, tets: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Barycentric weights `(n, 4)` (cell centre, base, A, B) of points `q` in `tets`."""
+        rel = q - self.cell_centre[self.tet_cell[tets]]
+        lam = np.einsum("nij,nj->ni", self.tet_inv[tets], rel)
+        return np.concatenate([1.0 - lam.sum(axis=1, keepdims=True), lam], axis=1)
+
+    def _combine(self, tets: np.ndarray, w: np.ndarray) -> np.ndarray:
+        vals = w[:, :1] * self.cell_value[self.tet_cell[tets]]
+        for k in range(3):
+            vals += w[:, k + 1: k + 2] * self.point_value[self.tet_pts[tets, k]]
+        return vals
+
+    def sample_points(self, q: np.ndarray, k_candidates: tuple[int, ...] = (8, 32, 128)) -> np.ndarray:
+        """Values `(n, 3)` at arbitrary points `(n, 3)`; NaN in no cell of the set."""
+        q = np.asarray(q, np.float64).reshape(-1, 3)
+        out = np.full((q.shape[0], 3), np.nan)
+        todo = np.arange(q.shape[0])
+        tree = cKDTree(self.cell_centre)
+        # points outside every cell box cannot be in a cell: skip them at once
+        inbox = (q >= self.cell_lo.min(axis=0)).all(axis=1) & (q <= self.cell_hi.max(axis=0)).all(axis=1)
+        todo = todo[inbox]
+        for k in k_candidates:
+            if todo.size == 0:
+                break
+            kk = min(k, self.n_cells)
+            found_all = np.zeros(todo.size, bool)
+            for s in range(0, todo.size, max(1, 200_000 // kk)):
+                ids = todo[s: s + max(1, 200_000 // kk)]
+                _, cand = tree.query(q[ids], k=kk)
+                cand = cand.reshape(ids.size, kk)
+                found = self._locate(q, ids, cand, out)
+                found_all[s: s + ids.size] = found
+                if kk == self.n_cells:
+                    found_all[s: s + ids.size] = True
+            todo = todo[~found_all]
+        return out
+
+    def _locate(self, q: np.ndarray, ids: np.ndarray, cand: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Test the tets of candidate cells; write values; return which `ids` were found."""
+        pid = np.repeat(np.arange(ids.size), cand.shape[1])
+        cells = cand.reshape(-1)
+        inb = (q[ids[pid]] >= self.cell_lo[cells] - 1e-9 * self.cell_size[cells]).all(axis=1) & (
+            q[ids[pid]] <= self.cell_hi[cells] + 1e-9 * self.cell_size[cells]).all(axis=1)
+        pid, cells = pid[inb], cells[inb]
+        counts = self.cell_tet_offsets[cells + 1] - self.cell_tet_offsets[cells]
+        tpid = np.repeat(pid, counts)
+        tets = np.repeat(self.cell_tet_offsets[cells], counts) + (
+            np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+        w = self._bary(tets, q[ids[tpid]])
+        inside = (w >= -_INSIDE_TOL).all(axis=1) & self.tet_ok[tets]
+        tpid, tets, w = tpid[inside], tets[inside], w[inside]
+        found = np.zeros(ids.size, bool)
+        if tpid.size:
+            # first hit per point (the cell order follows the candidate order: nearest first)
+            first = np.unique(tpid, return_index=True)[1]
+            out[ids[tpid[first]]] = self._combine(tets[first], w[first])
+            found[tpid[first]] = True
+        return found
+
+    def sample_grid(self, axes: list[np.ndarray]) -> tuple[np.ndarray, int]:
+        """Values `(nx, ny, nz, 3)` at the nodes of a tensor grid (NaN in no cell), scattering
+        each tetrahedron onto the nodes inside its bounding box. Returns also the number of
+        point-in-tet tests made."""
+        shape = tuple(a.size for a in axes)
+        out = np.full((*shape, 3), np.nan)
+        flat = out.reshape(-1, 3)
+        tets_all = np.flatnonzero(self.tet_ok)
+        if tets_all.size == 0:
+            return out, 0
+        # bounding boxes of the tets
+        verts = [self.cell_centre[self.tet_cell[tets_all]]] + [
+            self.point_xyz[self.tet_pts[tets_all, k]] for k in range(3)]
+        tlo = np.minimum.reduce(verts)
+        thi = np.maximum.reduce(verts)
+        del verts
+        i0 = np.stack([np.searchsorted(axes[a], tlo[:, a] - 1e-9 * (thi[:, a] - tlo[:, a] + 1), "left")
+                       for a in range(3)], axis=1)
+        i1 = np.stack([np.searchsorted(axes[a], thi[:, a] + 1e-9 * (thi[:, a] - tlo[:, a] + 1), "right")
+                       for a in range(3)], axis=1)
+        span = np.maximum(i1 - i0, 0)
+        n_cand = span.prod(axis=1)
+        keep = n_cand > 0
+        tets_all, i0, span, n_cand = tets_all[keep], i0[keep], span[keep], n_cand[keep]
+        tests = int(n_cand.sum())
+        csum = np.cumsum(n_cand)
+        budget = _CHUNK * 2
+        start = 0
+        while start < tets_all.size:
+            base = csum[start - 1] if start else 0
+            stop = int(np.searchsorted(csum, base + budget, "right"))
+            stop = max(stop, start + 1)
+            sl = slice(start, stop)
+            cnt = n_cand[sl]
+            rep = np.repeat(np.arange(stop - start), cnt)
+            local = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            sp = span[sl][rep]
+            ii = i0[sl][rep, 0] + local // (sp[:, 1] * sp[:, 2])
+            jj = i0[sl][rep, 1] + (local // sp[:, 2]) % sp[:, 1]
+            kk = i0[sl][rep, 2] + local % sp[:, 2]
+            q = np.stack([axes[0][ii], axes[1][jj], axes[2][kk]], axis=1)
+            tets = tets_all[sl][rep]
+            w = self._bary(tets, q)
+            inside = (w >= -_INSIDE_TOL).all(axis=1)
+            node = (ii * shape[1] + jj) * shape[2] + kk
+            flat[node[inside]] = self._combine(tets[inside], w[inside])
+            start = stop
+        return out, tests
+
+
+def boundary_face_values(
+    mesh: PolyMesh, faces: np.ndarray, face_area: np.ndarray, owner_value: np.ndarray,
+    boundary: BoundaryValues,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Values `(n, 3)` of boundary `faces` and whether each is on a proper patch (not empty,
+    not coupled): those carry the boundary point values in `volPointInterpolation`."""
+    vals = np.zeros((faces.size, 3))
+    proper = np.zeros(faces.size, bool)
+    for name, ptype, start, n in mesh.patches:
+        sel = (faces >= start) & (faces < start + n)
+        if not sel.any() or ptype in _NOT_PROPER:
+            continue
+        proper[sel] = True
+        spec = boundary.values.get(name, "cell")
+        if isinstance(spec, str):
+            v = owner_value[sel]
+            if spec == "slip":
+                nrm = face_area[sel] / np.maximum(np.linalg.norm(face_area[sel], axis=1), 1e-300)[:, None]
+                v = v - np.einsum("ij,ij->i", v, nrm)[:, None] * nrm
+            vals[sel] = v
+        else:
+            arr = np.asarray(spec, np.float64)
+            vals[sel] = arr if arr.ndim == 1 else arr[faces[sel] - start]
+    return vals, proper
+
+
+def build_sampler(
+    mesh: PolyMesh, cell_value: np.ndarray, boundary: BoundaryValues, region_cells: np.ndarray,
+) -> CellPointSampler:
+    """The cellPoint interpolant over the cells `region_cells` (global numbers, sorted).
+
+    Reads only what those cells need: their points, the cells around those points (for the
+    point values), and those cells' faces (for their centres)."""
+    nc_all = mesh.n_cells
+    in_region = np.zeros(nc_all, bool)
+    in_region[region_cells] = True
+    # points of the region cells
+    rfaces = _faces_of_cells(mesh, in_region)
+    pmask = np.zeros(mesh.points.shape[0], bool)
+    flat_r, _, _ = _gather_face_points(mesh, rfaces)
+    pmask[flat_r] = True
+    # ring: every cell touching one of those points
+    tfaces = _faces_touching(mesh, pmask)
+    ring = np.zeros(nc_all, bool)
+    ring[mesh.owner[tfaces]] = True
+    ti = tfaces[tfaces < mesh.n_internal]
+    ring[mesh.neighbour[ti]] = True
+    ring_cells = np.flatnonzero(ring)
+    cell_local = np.full(nc_all, -1, np.int64)
+    cell_local[ring_cells] = np.arange(ring_cells.size)
+    # all faces of the ring cells, their geometry, the ring's cell centres
+    gfaces = _faces_of_cells(mesh, ring)
+    fctr, farea = face_geometry(mesh, gfaces)
+    own_l = cell_local[mesh.owner[gfaces]]
+    nei_l = np.full(gfaces.size, -1, np.int64)
+    internal = gfaces < mesh.n_internal
+    nei_l[internal] = cell_local[mesh.neighbour[gfaces[internal]]]
+    cc = cell_centres(fctr, farea, own_l, nei_l, ring_cells.size)
+    cv = np.asarray(cell_value, np.float64)[ring_cells]
+    face_pos = np.full(mesh.n_faces, -1, np.int64)
+    face_pos[gfaces] = np.arange(gfaces.size)
+
+    # ---- point values (volPointInterpolation) for the region points -------------------
+    pts = np.flatnonzero(pmask)
+    plocal = np.full(mesh.points.shape[0], -1, np.int64)
+    plocal[pts] = np.arange(pts.size)
+    pxyz = mesh.points[pts]
+    flat, offs, _ = _gather_face_points(mesh, tfaces)
+    sizes = np.diff(offs)
+    lab_p = plocal[flat]
+    own_rep = np.repeat(cell_local[mesh.owner[tfaces]], sizes)
+    nei_t = np.full(tfaces.size, -1, np.int64)
+    ti_mask = tfaces < mesh.n_internal
+    nei_t[ti_mask] = cell_local[mesh.neighbour[tfaces[ti_mask]]]
+    nei_rep = np.repeat(nei_t, sizes)
+    pairs_p = np.concatenate([lab_p, lab_p])
+    pairs_c = np.concatenate([own_rep, nei_rep])
+    ok = (pairs_p >= 0) & (pairs_c >= 0)
+    key = np.unique(pairs_p[ok] * np.int64(ring_cells.size) + pairs_c[ok])
+    pp, pc = key // ring_cells.size, key % ring_cells.size
+    # boundary faces among those touching the region points
+    bsel = ~ti_mask
+    bfaces = tfaces[bsel]
+    bvals, bproper = boundary_face_values(
+        mesh, bfaces, farea[face_pos[bfaces]], cell_value[mesh.owner[bfaces]], boundary)
+    b_ctr = fctr[face_pos[bfaces]]
+    bflat, boffs, _ = _gather_face_points(mesh, bfaces)
+    bsizes = np.diff(boffs)
+    bp = plocal[bflat]
+    bface_rep = np.repeat(np.arange(bfaces.size), bsizes)
+    bproper_rep = bproper[bface_rep] & (bp >= 0)
+    is_patch = np.zeros(pts.size, bool)
+    is_patch[bp[bproper_rep]] = True
+    # interior points: inverse distance to the cell centres
+    wsum = np.zeros(pts.size)
+    vsum = np.zeros((pts.size, 3))
+    sel = ~is_patch[pp]
+    w = 1.0 / np.linalg.norm(pxyz[pp[sel]] - cc[pc[sel]], axis=1)
+    wsum += np.bincount(pp[sel], weights=w, minlength=pts.size)
+    for a in range(3):
+        vsum[:, a] += np.bincount(pp[sel], weights=w * cv[pc[sel], a], minlength=pts.size)
+    # patch points: inverse distance to the proper patch faces' centres, face values
+    bpp = bp[bproper_rep]
+    bff = bface_rep[bproper_rep]
+    w = 1.0 / np.linalg.norm(pxyz[bpp] - b_ctr[bff], axis=1)
+    wsum += np.bincount(bpp, weights=w, minlength=pts.size)
+    for a in range(3):
+        vsum[:, a] += np.bincount(bpp, weights=w * bvals[bff, a], minlength=pts.size)
+    pval = vsum / np.where(wsum > 0, wsum, 1.0)[:, None]
+    pval[wsum <= 0] = np.nan
+
+    # ---- tetrahedra of the region cells ---------------------------------------------
+    sub_cells = cell_local[region_cells]
+    sub_local = np.full(ring_cells.size, -1, np.int64)
+    sub_local[sub_cells] = np.arange(region_cells.size)
+    fl, fo, _ = _gather_face_points(mesh, rfaces)
+    fsz = np.diff(fo)
+    base = _base_points(mesh, rfaces, fl, fo, cc, cell_local)
+    tets_cell, tets_pts = [], []
+    rown = sub_local[cell_local[mesh.owner[rfaces]]]
+    rnei = np.full(rfaces.size, -1, np.int64)
+    rint = rfaces < mesh.n_internal
+    rnei[rint] = sub_local[cell_local[mesh.neighbour[rfaces[rint]]]]
+    ntri = fsz - 2
+    fidx = np.repeat(np.arange(rfaces.size), ntri)
+    tpt = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1  # 1 .. n-2
+    b = base[fidx]
+    s = fsz[fidx]
+    start = fo[:-1][fidx]
+    p_base = plocal[fl[start + b]]
+    p_a = plocal[fl[start + (b + tpt) % s]]
+    p_b = plocal[fl[start + (b + tpt + 1) % s]]
+    for side, swap in ((rown, False), (rnei, True)):
+        cs = side[fidx]
+        m = cs >= 0
+        tets_cell.append(cs[m])
+        if swap:
+            tets_pts.append(np.stack([p_base[m], p_b[m], p_a[m]], axis=1))
+        else:
+            tets_pts.append(np.stack([p_base[m], p_a[m], p_b[m]], axis=1))
+    tet_cell = np.concatenate(tets_cell)
+    tet_pts = np.concatenate(tets_pts)
+    order = np.argsort(tet_cell, kind="stable")
+    tet_cell, tet_pts = tet_cell[order], tet_pts[order]
+    cto = np.zeros(region_cells.size + 1, np.int64)
+    np.cumsum(np.bincount(tet_cell, minlength=region_cells.size), out=cto[1:])
+    rcc = cc[sub_cells]
+    e = np.stack([pxyz[tet_pts[:, k]] - rcc[tet_cell] for k in range(3)], axis=2)  # (n, 3, 3) columns
+    det = np.linalg.det(e)
+    scale = np.max(np.abs(e), axis=(1, 2)) ** 3
+    tet_ok = np.abs(det) > 1e-12 * np.maximum(scale, 1e-300)
+    e[~tet_ok] = np.eye(3)
+    inv = np.linalg.inv(e)
+    # cell boxes (from their points)
+    clo = np.full((region_cells.size, 3), np.inf)
+    chi = np.full((region_cells.size, 3), -np.inf)
+    for k in range(3):
+        np.minimum.at(clo, tet_cell, pxyz[tet_pts[:, k]])
+        np.maximum.at(chi, tet_cell, pxyz[tet_pts[:, k]])
+    return CellPointSampler(
+        cell_centre=rcc, cell_value=cv[sub_cells], cell_size=chi - clo, cell_lo=clo, cell_hi=chi,
+        point_xyz=pxyz, point_value=pval, tet_cell=tet_cell, tet_pts=tet_pts, tet_inv=inv,
+        tet_ok=tet_ok, cell_tet_offsets=cto, n_cells_total=nc_all,
+        n_boundary_points=int(is_patch.sum()),
+    )
+
+
+def _base_points(
+    mesh: PolyMesh, faces: np.ndarray, flat: np.ndarray, offs: np.ndarray, cc: np.ndarray,
+    cell_local: np.ndarray,
+) -> np.ndarray:
+    """Tet base point (index within the face) of each face, as `findFaceBasePts`: the first
+    face point whose fan of tets is positive (quality > 1e-15) from the owner's centre and,
+    for internal faces, from the neighbour's centre."""
+    sizes = np.diff(offs)
+    base = np.zeros(faces.size, np.int64)
+    own_c = cc[cell_local[mesh.owner[faces]]]
+    internal = faces < mesh.n_internal
+    nei_c = np.full((faces.size, 3), np.nan)
+    nl = cell_local[mesh.neighbour[faces[internal]]]
+    nei_c[internal] = np.where((nl >= 0)[:, None], cc[np.maximum(nl, 0)], np.nan)
+    bad = ~_fan_ok(mesh, flat, offs, sizes, np.zeros(faces.size, np.int64), own_c, nei_c)
+    for i in np.flatnonzero(bad):
+        f = mesh.points[flat[offs[i]: offs[i + 1]]]
+        for b in range(1, sizes[i]):
+            if _fan_ok_one(f, b, own_c[i], nei_c[i]):
+                base[i] = b
+                break
+    return base
+
+
+def _quality(a, b, c, d):
+    """OpenFOAM's tetrahedron::quality: signed volume over that of the regular tet with the
+    same circumradius."""
+    ba, ca, da = b - a, c - a, d - a
+    vol = np.einsum("...i,...i->...", ba, np.cross(ca, da)) / 6.0
+    # circumradius
+    num = (np.einsum("...i,...i->...", ba, ba)[..., None] * np.cross(ca, da)
+           + np.einsum("...i,...i->...", ca, ca)[..., None] * np.cross(da, ba)
+           + np.einsum("...i,...i->...", da, da)[..., None] * np.cross(ba, ca))
+    denom = 2.0 * np.einsum("...i,...i->...", ba, np.cross(ca, da))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.linalg.norm(num, axis=-1) / np.abs(denom)
+    r = np.where(np.isfinite(r), np.minimum(r, 1e300), 1e300)
+    return vol / (8.0 / (9.0 * np.sqrt(3.0)) * np.minimum(r, 1e100) ** 3 + 1e-300)
+
+
+def _fan_ok(mesh, flat, offs, sizes, base, own_c, nei_c) -> np.ndarray:
+    n = sizes.size
+    ntri = sizes - 2
+    fidx = np.repeat(np.arange(n), ntri)
+    tpt = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
+    s = sizes[fidx]
+    start = offs[:-1][fidx]
+    b = base[fidx]
+    p0 = mesh.points[flat[start + b]]
+    pa = mesh.points[flat[start + (b + tpt) % s]]
+    pb = mesh.points[flat[start + (b + tpt + 1) % s]]
+    q_own = _quality(own_c[fidx], p0, pa, pb)
+    q_nei = _quality(nei_c[fidx], p0, pb, pa)
+    q_nei = np.where(np.isnan(nei_c[fidx, 0]), np.inf, q_nei)
+    q = np.minimum(q_own, q_nei)
+    ok = np.ones(n, bool)
+    np.logical_and.at(ok, fidx, q > _MIN_TET_QUALITY)
+    return ok
+
+
+def _fan_ok_one(f: np.ndarray, b: int, own_c: np.ndarray, nei_c: np.ndarray) -> bool:
+    s = f.shape[0]
+    for t in range(1, s - 1):
+        p0, pa, pb = f[b], f[(b + t) % s], f[(b + t + 1) % s]
+        if _quality(own_c, p0, pa, pb) <= _MIN_TET_QUALITY:
+            return False
+        if not np.isnan(nei_c[0]) and _quality(nei_c, p0, pb, pa) <= _MIN_TET_QUALITY:
+            return False
+    return True
