@@ -5,7 +5,10 @@
 - `sta`, `rtd`: Windcube 10-minute statistics and line-of-sight records.
 - `zephir`: ZephIR 10-minute CSV exports.
 - `probes`: CFD probe files (OpenFOAM probes dictionary and output, zCFD, CSV).
-- `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII) for `lidarjax.GridField`.
+- `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII, OpenFOAM cases) for
+  `lidarjax.GridField`.
+- `openfoam`: OpenFOAM case directories (mesh + `U`, ASCII/binary/gzip) and OpenFOAM's own
+  cellPoint interpolation at arbitrary points (`sample_openfoam`).
 
 Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/write),
 `progress` (tqdm progress bars). Each raises an `ImportError` naming the extra when used
@@ -20,6 +23,13 @@ from .fields import read_fluent_points as read_fluent_points
 from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
+from .openfoam import OpenFOAMField as OpenFOAMField
+from .openfoam import is_openfoam_case as is_openfoam_case
+from .openfoam import openfoam_times as openfoam_times
+from .openfoam import read_openfoam_field as read_openfoam_field
+from .openfoam import read_openfoam_mesh as read_openfoam_mesh
+from .openfoam import resample_openfoam as resample_openfoam
+from .openfoam import sample_openfoam as sample_openfoam
 from .probes import OpenFoamProbes as OpenFoamProbes
 from .probes import read_openfoam_probes as read_openfoam_probes
 from .probes import read_probe_csv as read_probe_csv

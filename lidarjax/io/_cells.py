@@ -27,6 +27,7 @@ are NaN: nothing is ever interpolated across a solid.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -278,10 +279,11 @@ class CellPointSampler:
             found[tpid[first]] = True
         return found
 
-    def sample_grid(self, axes: list[np.ndarray]) -> tuple[np.ndarray, int]:
+    def sample_grid(self, axes: list[np.ndarray], use_numba: bool = True) -> tuple[np.ndarray, int]:
         """Values `(nx, ny, nz, 3)` at the nodes of a tensor grid (NaN in no cell), scattering
         each tetrahedron onto the nodes inside its bounding box. Returns also the number of
-        point-in-tet tests made."""
+        point-in-tet tests made. Uses a numba kernel when numba is installed (the `openfoam`
+        extra), else the same computation vectorised in numpy (several times slower)."""
         shape = tuple(a.size for a in axes)
         out = np.full((*shape, 3), np.nan)
         flat = out.reshape(-1, 3)
@@ -303,6 +305,13 @@ class CellPointSampler:
         keep = n_cand > 0
         tets_all, i0, span, n_cand = tets_all[keep], i0[keep], span[keep], n_cand[keep]
         tests = int(n_cand.sum())
+        kernel = _grid_kernel() if use_numba else None
+        if kernel is not None:
+            vc = self.cell_value[self.tet_cell[tets_all]]
+            vp = np.stack([self.point_value[self.tet_pts[tets_all, k]] for k in range(3)], axis=1)
+            kernel(self.cell_centre[self.tet_cell[tets_all]], np.ascontiguousarray(self.tet_inv[tets_all]),
+                   vc, vp, i0, i0 + span, axes[0], axes[1], axes[2], out)
+            return out, tests
         csum = np.cumsum(n_cand)
         budget = _CHUNK * 2
         start = 0
@@ -356,6 +365,7 @@ def boundary_face_values(
 
 def build_sampler(
     mesh: PolyMesh, cell_value: np.ndarray, boundary: BoundaryValues, region_cells: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> CellPointSampler:
     """The cellPoint interpolant over the cells `region_cells` (global numbers, sorted).
 
@@ -406,7 +416,8 @@ def build_sampler(
     pairs_p = np.concatenate([lab_p, lab_p])
     pairs_c = np.concatenate([own_rep, nei_rep])
     ok = (pairs_p >= 0) & (pairs_c >= 0)
-    key = np.unique(pairs_p[ok] * np.int64(ring_cells.size) + pairs_c[ok])
+    key = np.sort(pairs_p[ok] * np.int64(ring_cells.size) + pairs_c[ok])
+    key = key[np.concatenate([[True], key[1:] != key[:-1]])] if key.size else key
     pp, pc = key // ring_cells.size, key % ring_cells.size
     # boundary faces among those touching the region points
     bsel = ~ti_mask
@@ -476,23 +487,46 @@ def build_sampler(
     np.cumsum(np.bincount(tet_cell, minlength=region_cells.size), out=cto[1:])
     rcc = cc[sub_cells]
     e = np.stack([pxyz[tet_pts[:, k]] - rcc[tet_cell] for k in range(3)], axis=2)  # (n, 3, 3) columns
-    det = np.linalg.det(e)
+    inv, det = _inverse3(e)
     scale = np.max(np.abs(e), axis=(1, 2)) ** 3
     tet_ok = np.abs(det) > 1e-12 * np.maximum(scale, 1e-300)
-    e[~tet_ok] = np.eye(3)
-    inv = np.linalg.inv(e)
-    # cell boxes (from their points)
-    clo = np.full((region_cells.size, 3), np.inf)
-    chi = np.full((region_cells.size, 3), -np.inf)
-    for k in range(3):
-        np.minimum.at(clo, tet_cell, pxyz[tet_pts[:, k]])
-        np.maximum.at(chi, tet_cell, pxyz[tet_pts[:, k]])
+    inv[~tet_ok] = 0.0
+    del e
+    if bounds is not None:
+        clo, chi = bounds[0][region_cells], bounds[1][region_cells]
+    else:
+        clo = np.full((region_cells.size, 3), np.inf)
+        chi = np.full((region_cells.size, 3), -np.inf)
+        for k in range(3):
+            np.minimum.at(clo, tet_cell, pxyz[tet_pts[:, k]])
+            np.maximum.at(chi, tet_cell, pxyz[tet_pts[:, k]])
     return CellPointSampler(
         cell_centre=rcc, cell_value=cv[sub_cells], cell_size=chi - clo, cell_lo=clo, cell_hi=chi,
         point_xyz=pxyz, point_value=pval, tet_cell=tet_cell, tet_pts=tet_pts, tet_inv=inv,
         tet_ok=tet_ok, cell_tet_offsets=cto, n_cells_total=nc_all,
         n_boundary_points=int(is_patch.sum()),
     )
+
+
+def _inverse3(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverses and determinants of `(n, 3, 3)` matrices (adjugate formula; singular rows
+    give inf/nan and are masked by the caller)."""
+    a, b, c = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
+    d, e, f = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
+    g, h, i = m[:, 2, 0], m[:, 2, 1], m[:, 2, 2]
+    A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * A + b * B + c * C
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = 1.0 / det
+        inv = np.empty_like(m)
+        inv[:, 0, 0], inv[:, 1, 0], inv[:, 2, 0] = A * r, B * r, C * r
+        inv[:, 0, 1] = (c * h - b * i) * r
+        inv[:, 1, 1] = (a * i - c * g) * r
+        inv[:, 2, 1] = (b * g - a * h) * r
+        inv[:, 0, 2] = (b * f - c * e) * r
+        inv[:, 1, 2] = (c * d - a * f) * r
+        inv[:, 2, 2] = (a * e - b * d) * r
+    return inv, det
 
 
 def _base_points(
@@ -509,13 +543,21 @@ def _base_points(
     nei_c = np.full((faces.size, 3), np.nan)
     nl = cell_local[mesh.neighbour[faces[internal]]]
     nei_c[internal] = np.where((nl >= 0)[:, None], cc[np.maximum(nl, 0)], np.nan)
-    bad = ~_fan_ok(mesh, flat, offs, sizes, np.zeros(faces.size, np.int64), own_c, nei_c)
-    for i in np.flatnonzero(bad):
-        f = mesh.points[flat[offs[i]: offs[i + 1]]]
-        for b in range(1, sizes[i]):
-            if _fan_ok_one(f, b, own_c[i], nei_c[i]):
-                base[i] = b
-                break
+    bad = np.flatnonzero(~_fan_ok(mesh, flat, offs, sizes, base, own_c, nei_c))
+    trial = 1
+    while bad.size:
+        bad = bad[sizes[bad] > trial]
+        if not bad.size:
+            break
+        sub_sizes = sizes[bad]
+        sub_offs = np.zeros(bad.size + 1, np.int64)
+        np.cumsum(sub_sizes, out=sub_offs[1:])
+        sub_flat = flat[np.repeat(offs[bad], sub_sizes) + np.arange(sub_offs[-1])
+                        - np.repeat(sub_offs[:-1], sub_sizes)]
+        ok = _fan_ok(mesh, sub_flat, sub_offs, sub_sizes, np.full(bad.size, trial), own_c[bad], nei_c[bad])
+        base[bad[ok]] = trial
+        bad = bad[~ok]
+        trial += 1
     return base
 
 
@@ -555,12 +597,38 @@ def _fan_ok(mesh, flat, offs, sizes, base, own_c, nei_c) -> np.ndarray:
     return ok
 
 
-def _fan_ok_one(f: np.ndarray, b: int, own_c: np.ndarray, nei_c: np.ndarray) -> bool:
-    s = f.shape[0]
-    for t in range(1, s - 1):
-        p0, pa, pb = f[b], f[(b + t) % s], f[(b + t + 1) % s]
-        if _quality(own_c, p0, pa, pb) <= _MIN_TET_QUALITY:
-            return False
-        if not np.isnan(nei_c[0]) and _quality(nei_c, p0, pb, pa) <= _MIN_TET_QUALITY:
-            return False
-    return True
+@functools.cache
+def _grid_kernel():
+    """The numba-compiled tet-to-grid scatter, or None without numba."""
+    try:
+        import numba
+    except ImportError:
+        return None
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(centre, inv, vc, vp, i0, i1, ax, ay, az, out):  # pragma: no cover - compiled
+        tol = _INSIDE_TOL
+        for t in range(centre.shape[0]):
+            for i in range(i0[t, 0], i1[t, 0]):
+                rx = ax[i] - centre[t, 0]
+                for j in range(i0[t, 1], i1[t, 1]):
+                    ry = ay[j] - centre[t, 1]
+                    for k in range(i0[t, 2], i1[t, 2]):
+                        rz = az[k] - centre[t, 2]
+                        l1 = inv[t, 0, 0] * rx + inv[t, 0, 1] * ry + inv[t, 0, 2] * rz
+                        if l1 < -tol:
+                            continue
+                        l2 = inv[t, 1, 0] * rx + inv[t, 1, 1] * ry + inv[t, 1, 2] * rz
+                        if l2 < -tol:
+                            continue
+                        l3 = inv[t, 2, 0] * rx + inv[t, 2, 1] * ry + inv[t, 2, 2] * rz
+                        if l3 < -tol:
+                            continue
+                        l0 = 1.0 - l1 - l2 - l3
+                        if l0 < -tol:
+                            continue
+                        for c in range(3):
+                            out[i, j, k, c] = (l0 * vc[t, c] + l1 * vp[t, 0, c] + l2 * vp[t, 1, c]
+                                               + l3 * vp[t, 2, c])
+
+    return kernel

@@ -277,6 +277,15 @@ class Cursor:
     def read_typed_list(self) -> np.ndarray:
         """`List<type> N (...)` after `nonuniform`: returns `(N,)` or `(N, k)` float64."""
         start = self.pos
+        if self.peek().isdigit():  # "nonuniform 0" (an empty field, written without a type)
+            n = self.read_size("data")
+            if n != 0:
+                raise self.error(f"expected List<type> before a non-empty list of {n} items", start)
+            self.skip_space()
+            if self.data[self.pos: self.pos + 1] == b"(":
+                self.pos += 1
+                self.expect(b")", "closing an empty list")
+            return np.zeros((0,))
         tok = self.token().decode(errors="replace")
         m = re.fullmatch(r"List<(\w+)>", tok)
         if not m or m.group(1) not in _COMPONENTS:

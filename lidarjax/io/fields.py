@@ -1,4 +1,4 @@
-"""CFD velocity fields from files: `.npz`, NetCDF and Fluent ASCII exports.
+"""CFD velocity fields from files: `.npz`, NetCDF, Fluent ASCII exports, OpenFOAM cases.
 
 All readers return node coordinates in metres (CFD frame, 1-D, strictly increasing) and
 velocities `(nx, ny, nz, 3)` = `(u, v, w)` in m/s in the CFD frame, the arguments of
@@ -9,6 +9,9 @@ data, nodes outside the data's convex hull).
   `(nx, ny, nz)`, or one `velocity (nx, ny, nz, 3)`;
 - `.nc`, `.nc4`, `.cdf` (NetCDF): variables `u`, `v`, `w` on coordinates `x`, `y`, `z`
   in any dimension order; needs xarray (`pip install lidarjax[netcdf]`);
+- a directory (or `format="openfoam"`): an OpenFOAM case (`constant/polyMesh` plus a
+  time directory's `U`, ASCII or binary, plain or gzipped), sampled with the mesh's own
+  cellPoint interpolation onto a grid resolving its cells (see `lidarjax.io.openfoam`);
 - anything else (`.csv`, `.txt`, `.dat`, `.ascii`): a Fluent ASCII export, whose header
   names `x-coordinate`, `y-coordinate`, `z-coordinate`, `x-velocity`, `y-velocity`,
   `z-velocity` in any order among other columns (`nodenumber`, `pressure` ...), comma or
@@ -91,6 +94,16 @@ class FieldLoadReport:
       points, NaN-filled (0 for gridded formats).
     - `nan_fraction`: fraction of grid nodes whose velocity has a NaN component (solid
       nodes, or outside the hull).
+    - `spacing_min`, `spacing_max`: smallest and largest node spacing per axis (metres) of
+      a resampled grid (OpenFOAM cases; None otherwise).
+    - `n_cells`, `n_cells_used`: cells in the mesh, and cells located and sampled (those
+      overlapping the grid) (OpenFOAM cases).
+    - `time`: the time directory read (OpenFOAM cases).
+    - `resample_error_rms`, `resample_error_max`: |velocity| difference (m/s) between the
+      grid's trilinear interpolation and the mesh's own cellPoint interpolation at random
+      points of the region (OpenFOAM cases; NaN otherwise). Near walls, where the velocity
+      drops to zero across one cell, the maximum is dominated by the first cell layer.
+    - `notes`: anything else worth knowing (a coarsened automatic grid ...).
     """
 
     path: str
@@ -99,6 +112,14 @@ class FieldLoadReport:
     n_points: int
     outside_fraction: float
     nan_fraction: float
+    spacing_min: tuple[float, float, float] | None = None
+    spacing_max: tuple[float, float, float] | None = None
+    n_cells: int = 0
+    n_cells_used: int = 0
+    time: str | None = None
+    resample_error_rms: float = math.nan
+    resample_error_max: float = math.nan
+    notes: tuple[str, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -455,9 +476,13 @@ def resample_to_grid(
 
 def _format_of(path: Path, fmt: str | None) -> str:
     if fmt is not None:
-        if fmt not in ("npz", "netcdf", "fluent"):
-            raise ValueError(f"format must be 'npz', 'netcdf' or 'fluent', got {fmt!r}")
+        if fmt not in ("npz", "netcdf", "fluent", "openfoam"):
+            raise ValueError(f"format must be 'npz', 'netcdf', 'fluent' or 'openfoam', got {fmt!r}")
         return fmt
+    from .openfoam import is_openfoam_case
+
+    if path.is_dir() or is_openfoam_case(path):
+        return "openfoam"
     suffix = path.suffix.lower()
     if suffix == ".npz":
         return "npz"
@@ -474,31 +499,63 @@ def read_field_arrays(
     progress: bool = False,
     format: str | None = None,
     chunk_rows: int = 200_000,
+    region: tuple[Any, Any] | None = None,
+    time: Any = None,
 ) -> FieldArrays:
     """Read a velocity field as numpy arrays (see the module docstring for the formats).
 
     **Arguments:**
 
-    - `path`: the file; the format follows the suffix unless `format` is given
-      (`"npz"`, `"netcdf"`, `"fluent"`).
-    - `spacing`, `shape`: grid for scattered Fluent data (see `resample_to_grid`); an
-      error for gridded formats.
+    - `path`: the file, or an OpenFOAM case directory; the format follows the suffix (a
+      directory is an OpenFOAM case) unless `format` is given (`"npz"`, `"netcdf"`,
+      `"fluent"`, `"openfoam"`).
+    - `spacing`: grid spacing (metres, scalar or per axis) for scattered Fluent data (see
+      `resample_to_grid`) and OpenFOAM cases (default automatic: see below); an error for
+      gridded formats. `shape`: grid shape for Fluent data only.
+    - `region`: `(lo, hi)` CFD metres, e.g. `lidarjax.scan_bounds(scan, mounts, heights,
+      probe)`: only the data there is read and resampled (OpenFOAM: only the cells
+      overlapping it are located and sampled; Fluent: only the points inside it, plus a
+      10 % margin, are triangulated; gridded files are cropped to it plus one node).
+    - `time`: OpenFOAM time (number or directory name); default the latest holding `U`.
     - `progress`: progress bar while reading a Fluent export (tqdm, if installed).
     - `chunk_rows`: rows per parsing chunk for Fluent exports.
 
+    OpenFOAM cases are sampled with the mesh's own cellPoint interpolation (the values that
+    OpenFOAM's `probes` function object reports; see `lidarjax.io.openfoam`), at the nodes of
+    a grid that resolves the finest cells of the region: per axis, two nodes per width of the
+    finest cell spanning each coordinate (graded axes), at most
+    `lidarjax.io.openfoam.DEFAULT_MAX_NODES` nodes. Nodes inside solids (terrain,
+    buildings) are NaN. The report gives the spacing and the resampling error.
+
     **Returns:** `FieldArrays` (unpacks as `x, y, z, velocity`; `.report` is a
-    `FieldLoadReport` with the fraction of nodes outside the data's hull).
+    `FieldLoadReport`).
     """
-    p = require_file(path, "field file")
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"field file not found: {os.fspath(p)}")
     kind = _format_of(p, format)
+    if kind == "openfoam":
+        if shape is not None:
+            raise ValueError("shape applies to scattered Fluent exports; give spacing (metres) for "
+                             "an OpenFOAM case, or nothing for the automatic grid")
+        return _read_openfoam_arrays(p, region, spacing, time)
+    p = require_file(path, "field file")
+    if time is not None:
+        raise ValueError(f"{os.fspath(p)}: time applies to OpenFOAM cases only")
     if kind != "fluent":
         if spacing is not None or shape is not None:
             raise ValueError(
                 f"{os.fspath(p)}: spacing and shape apply to scattered Fluent exports only; "
                 f"this {kind} file is already gridded"
             )
-        return _read_npz(p) if kind == "npz" else _read_netcdf(p)
+        arrays = _read_npz(p) if kind == "npz" else _read_netcdf(p)
+        return arrays if region is None else _crop_arrays(arrays, region)
     points, velocity = read_fluent_points(p, progress=progress, chunk_rows=chunk_rows)
+    if region is not None:
+        lo, hi = _region_box(region)
+        margin = 0.1 * (hi - lo) + 1e-9
+        keep = np.all((points >= lo - margin) & (points <= hi + margin), axis=1)
+        points, velocity = points[keep], velocity[keep]
     try:
         arrays = resample_to_grid(points, velocity, spacing=spacing, shape=shape)
     except ValueError as err:
@@ -510,30 +567,82 @@ def read_field_arrays(
 def load_field(
     path: PathLike,
     *,
+    region: tuple[Any, Any] | None = None,
     spacing: float | Sequence[float] | None = None,
     shape: Sequence[int] | None = None,
+    time: Any = None,
     progress: bool = False,
     format: str | None = None,
     dtype: Any = None,
     return_report: bool = False,
 ) -> Any:
-    """Load a velocity field file as a `lidarjax.GridField`.
+    """Load a velocity field file (or an OpenFOAM case directory) as a `lidarjax.GridField`.
 
-    Arguments as `read_field_arrays`, plus `dtype` (the field's working float dtype;
-    default: JAX's default float, float64 only with x64 enabled) and `return_report`.
+    Arguments as `read_field_arrays` (`region=(lo, hi)` in CFD metres restricts reading and
+    resampling to where the beams look, e.g. `lidarjax.scan_bounds(...)`), plus `dtype` (the
+    field's working float dtype; default: JAX's default float, float64 only with x64
+    enabled) and `return_report`.
 
     **Returns:** the `GridField`, or `(GridField, FieldLoadReport)` with
     `return_report=True` (the report gives e.g. the fraction of grid nodes outside the
-    convex hull of scattered Fluent data, which are NaN).
+    convex hull of scattered Fluent data, or an OpenFOAM grid's spacing and resampling
+    error).
     """
     from ..field import GridField
 
     arrays = read_field_arrays(
-        path, spacing=spacing, shape=shape, progress=progress, format=format
+        path, spacing=spacing, shape=shape, progress=progress, format=format, region=region,
+        time=time,
     )
     velocity = arrays.velocity if dtype is None else arrays.velocity.astype(dtype)
     field = GridField(arrays.x, arrays.y, arrays.z, velocity)
     return (field, arrays.report) if return_report else field
+
+
+def _region_box(region: Any) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        lo = np.asarray(region[0], np.float64).reshape(3)
+        hi = np.asarray(region[1], np.float64).reshape(3)
+    except (TypeError, ValueError, IndexError):
+        raise ValueError(f"region must be (lo, hi), two points (x, y, z) in metres, got {region!r}") from None
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi >= lo)):
+        raise ValueError(f"region must be (lo, hi) with finite lo <= hi (metres), got {region!r}")
+    return lo, hi
+
+
+def _crop_arrays(arrays: FieldArrays, region: Any) -> FieldArrays:
+    """The nodes covering `region` plus one node on each side (where the grid has them)."""
+    lo, hi = _region_box(region)
+    axes = (arrays.x, arrays.y, arrays.z)
+    sl = []
+    for a in range(3):
+        ax = axes[a]
+        i0 = max(int(np.searchsorted(ax, lo[a], "right")) - 2, 0)
+        i1 = min(int(np.searchsorted(ax, hi[a], "left")) + 2, ax.size)
+        if i1 - i0 < 2:
+            raise ValueError(f"{arrays.report.path}: region {lo.tolist()} .. {hi.tolist()} lies outside "
+                             f"the field's grid along {'xyz'[a]} ({ax[0]:g} .. {ax[-1]:g} m)")
+        sl.append(slice(i0, i1))
+    vel = arrays.velocity[sl[0], sl[1], sl[2]]
+    report = dataclasses.replace(arrays.report, shape=vel.shape[:3], nan_fraction=_nan_fraction(vel))
+    return FieldArrays(arrays.x[sl[0]], arrays.y[sl[1]], arrays.z[sl[2]], vel, report)
+
+
+def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any) -> FieldArrays:
+    from .openfoam import read_openfoam_field, resample_openfoam
+
+    of = read_openfoam_field(path, time=time)
+    box = None if region is None else _region_box(region)
+    axes, vel, info = resample_openfoam(of, box, spacing)
+    report = FieldLoadReport(
+        path=os.fspath(of.case), format="openfoam", shape=vel.shape[:3],  # type: ignore[arg-type]
+        n_points=int(of.mesh.points.shape[0]), outside_fraction=0.0, nan_fraction=_nan_fraction(vel),
+        spacing_min=info["spacing_min"], spacing_max=info["spacing_max"], n_cells=of.mesh.n_cells,
+        n_cells_used=info["n_cells_used"], time=of.time,
+        resample_error_rms=info.get("resample_error_rms", math.nan),
+        resample_error_max=info.get("resample_error_max", math.nan), notes=tuple(info["notes"]),
+    )
+    return FieldArrays(axes[0], axes[1], axes[2], vel, report)
 
 
 def _as_arrays(field_or_arrays: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

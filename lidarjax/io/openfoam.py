@@ -41,6 +41,7 @@ __all__ = [
     "openfoam_times",
     "read_openfoam_field",
     "read_openfoam_mesh",
+    "resample_openfoam",
     "sample_openfoam",
 ]
 
@@ -193,7 +194,12 @@ def _as_vectors(value: Any, n: int, cur: Cursor, what: str) -> np.ndarray:
     """`('uniform', (3,))` or `('nonuniform', (n, 3))` to an `(n, 3)` array."""
     if not (isinstance(value, tuple) and len(value) == 2 and value[0] in ("uniform", "nonuniform")):
         raise cur.error(f"{what}: expected 'uniform (x y z)' or 'nonuniform List<vector> N (...)'")
-    arr = np.asarray(value[1], dtype=np.float64)
+    try:
+        arr = np.asarray(value[1], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise cur.error(f"{what}: not a list of numbers: {str(value[1])[:60]}") from None
+    if arr.size == 0 and n == 0:
+        return np.zeros((0, 3))
     if value[0] == "uniform":
         if arr.shape != (3,):
             raise cur.error(f"{what}: uniform value must be a vector (x y z), got shape {arr.shape}")
@@ -276,7 +282,8 @@ class OpenFOAMField:
         """The cellPoint interpolant over `cells` (global numbers; default every cell)."""
         if cells is None:
             cells = np.arange(self.mesh.n_cells)
-        return build_sampler(self.mesh, self.cell_values, self.boundary, np.asarray(cells, np.int64))
+        return build_sampler(self.mesh, self.cell_values, self.boundary, np.asarray(cells, np.int64),
+                             self.bounds)
 
     def cells_in_box(self, lo: Any, hi: Any) -> np.ndarray:
         """Global numbers of the cells whose bounding boxes overlap the box `[lo, hi]` (m)."""
