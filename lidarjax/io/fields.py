@@ -12,6 +12,9 @@ data, nodes outside the data's convex hull).
 - a directory (or `format="openfoam"`): an OpenFOAM case (`constant/polyMesh` plus a
   time directory's `U`, ASCII or binary, plain or gzipped), sampled with the mesh's own
   cellPoint interpolation onto a grid resolving its cells (see `lidarjax.io.openfoam`);
+- `.vtu`, `.vtk`, `.vtm` (VTK unstructured grids, e.g. from `foamToVTK` or ParaView; cell
+  and/or point data): sampled inside their own cells like OpenFOAM cases (see
+  `lidarjax.io.vtk`; needs meshio: `pip install lidarjax[meshio]`);
 - anything else (`.csv`, `.txt`, `.dat`, `.ascii`): a Fluent ASCII export, whose header
   names `x-coordinate`, `y-coordinate`, `z-coordinate`, `x-velocity`, `y-velocity`,
   `z-velocity` in any order among other columns (`nodenumber`, `pressure` ...), comma or
@@ -538,14 +541,16 @@ def resample_to_grid(
 
 def _format_of(path: Path, fmt: str | None) -> str:
     if fmt is not None:
-        if fmt not in ("npz", "netcdf", "fluent", "openfoam"):
-            raise ValueError(f"format must be 'npz', 'netcdf', 'fluent' or 'openfoam', got {fmt!r}")
+        if fmt not in ("npz", "netcdf", "fluent", "openfoam", "vtk"):
+            raise ValueError(f"format must be 'npz', 'netcdf', 'fluent', 'openfoam' or 'vtk', got {fmt!r}")
         return fmt
     from .openfoam import is_openfoam_case
 
     if path.is_dir() or is_openfoam_case(path):
         return "openfoam"
     suffix = path.suffix.lower()
+    if suffix in (".vtu", ".vtk", ".vtm"):
+        return "vtk"
     if suffix == ".npz":
         return "npz"
     if suffix in _NETCDF_SUFFIXES:
@@ -602,6 +607,11 @@ def read_field_arrays(
                              "an OpenFOAM case, or nothing for the automatic grid")
         return _read_openfoam_arrays(p, region, spacing, time)
     p = require_file(path, "field file")
+    if kind == "vtk":
+        if shape is not None or time is not None:
+            raise ValueError(f"{os.fspath(p)}: a VTK file takes spacing (metres) and region, "
+                             "not shape or time")
+        return _read_openfoam_arrays(p, region, spacing, None, vtk=True)
     if time is not None:
         raise ValueError(f"{os.fspath(p)}: time applies to OpenFOAM cases only")
     if kind != "fluent":
@@ -690,14 +700,20 @@ def _crop_arrays(arrays: FieldArrays, region: Any) -> FieldArrays:
     return FieldArrays(arrays.x[sl[0]], arrays.y[sl[1]], arrays.z[sl[2]], vel, report)
 
 
-def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any) -> FieldArrays:
+def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any, vtk: bool = False
+                          ) -> FieldArrays:
     from .openfoam import read_openfoam_field, resample_openfoam
 
-    of = read_openfoam_field(path, time=time)
+    if vtk:  # VTK unstructured grids: the same cellPoint sampling (lidarjax.io.vtk)
+        from .vtk import read_vtk_field
+
+        of = read_vtk_field(path)
+    else:
+        of = read_openfoam_field(path, time=time)
     box = None if region is None else _region_box(region)
     axes, vel, info = resample_openfoam(of, box, spacing)
     report = FieldLoadReport(
-        path=os.fspath(of.case), format="openfoam", shape=vel.shape[:3],  # type: ignore[arg-type]
+        path=os.fspath(of.case), format="vtk" if vtk else "openfoam", shape=vel.shape[:3],  # type: ignore[arg-type]
         n_points=int(of.mesh.points.shape[0]), outside_fraction=0.0, nan_fraction=_nan_fraction(vel),
         spacing_min=info["spacing_min"], spacing_max=info["spacing_max"], n_cells=of.mesh.n_cells,
         n_cells_used=info["n_cells_used"], time=of.time,
