@@ -64,7 +64,7 @@ __all__ = [
 DEFAULT_MAX_NODES_PER_AXIS = 128
 """Upper bound of the default grid size per axis for scattered data."""
 
-DEFAULT_MAX_EDGE_FACTOR = 2.0
+DEFAULT_MAX_EDGE_FACTOR = 4.0
 """Scattered data: simplices whose longest edge exceeds this many local node spacings are
 taken as bridging a solid and masked (see `resample_to_grid`)."""
 
@@ -568,6 +568,7 @@ def read_field_arrays(
     chunk_rows: int = 200_000,
     region: tuple[Any, Any] | None = None,
     time: Any = None,
+    max_edge_factor: float = DEFAULT_MAX_EDGE_FACTOR,
 ) -> FieldArrays:
     """Read a velocity field as numpy arrays (see the module docstring for the formats).
 
@@ -586,6 +587,8 @@ def read_field_arrays(
     - `time`: OpenFOAM time (number or directory name); default the latest holding `U`.
     - `progress`: progress bar while reading a Fluent export (tqdm, if installed).
     - `chunk_rows`: rows per parsing chunk for Fluent exports.
+    - `max_edge_factor`: Fluent exports: Delaunay simplices longer than this many local
+      node spacings are taken as bridging a solid and masked (see `resample_to_grid`).
 
     OpenFOAM cases are sampled with the mesh's own cellPoint interpolation (the values that
     OpenFOAM's `probes` function object reports; see `lidarjax.io.openfoam`), at the nodes of
@@ -629,7 +632,8 @@ def read_field_arrays(
         keep = np.all((points >= lo - margin) & (points <= hi + margin), axis=1)
         points, velocity = points[keep], velocity[keep]
     try:
-        arrays = resample_to_grid(points, velocity, spacing=spacing, shape=shape)
+        arrays = resample_to_grid(points, velocity, spacing=spacing, shape=shape,
+                                  max_edge_factor=max_edge_factor)
     except ValueError as err:
         raise ValueError(f"{os.fspath(p)}: {err}") from None
     report = dataclasses.replace(arrays.report, path=os.fspath(p), format="fluent")
@@ -643,6 +647,7 @@ def load_field(
     spacing: float | Sequence[float] | None = None,
     shape: Sequence[int] | None = None,
     time: Any = None,
+    max_edge_factor: float = DEFAULT_MAX_EDGE_FACTOR,
     progress: bool = False,
     format: str | None = None,
     dtype: Any = None,
@@ -664,7 +669,7 @@ def load_field(
 
     arrays = read_field_arrays(
         path, spacing=spacing, shape=shape, progress=progress, format=format, region=region,
-        time=time,
+        time=time, max_edge_factor=max_edge_factor,
     )
     velocity = arrays.velocity if dtype is None else arrays.velocity.astype(dtype)
     field = GridField(arrays.x, arrays.y, arrays.z, velocity)
