@@ -139,7 +139,7 @@ def hex_mesh(
     order = np.flatnonzero(active.transpose(2, 1, 0).reshape(-1))
     kk, jj, ii = np.unravel_index(order, (nz, ny, nx))
     cid[ii, jj, kk] = np.arange(order.size)
-    px, py, pz = nx + 1, ny + 1, nz + 1
+    px, py = nx + 1, ny + 1
 
     def pid(i, j, k):
         return i + px * (j + py * k)
@@ -187,13 +187,13 @@ def hex_mesh(
         nei.append(np.full(only_hi.sum(), -1))
         kind.append(np.where(on_edge_lo[only_hi], 1 + 2 * axis, 0))
     F = np.concatenate(faces)
-    O = np.concatenate(own)
+    own_all = np.concatenate(own)
     N = np.concatenate(nei)
     K = np.concatenate(kind)
     internal = K < 0
-    oi = np.lexsort((N[internal], O[internal]))
+    oi = np.lexsort((N[internal], own_all[internal]))
     fi = F[internal][oi]
-    b_order = np.lexsort((O[~internal], K[~internal]))
+    b_order = np.lexsort((own_all[~internal], K[~internal]))
     fb = F[~internal][b_order]
     kb = K[~internal][b_order]
     names = ["walls", "xmin", "xmax", "ymin", "ymax", "zmin", "zmax"]
@@ -204,7 +204,7 @@ def hex_mesh(
         start = n_int + int(np.count_nonzero(kb < p))
         patches.append((name, "wall" if p == 0 else "patch", start, cnt))
     faces_all = np.concatenate([fi, fb])
-    owner = np.concatenate([O[internal][oi], O[~internal][b_order]])
+    owner = np.concatenate([own_all[internal][oi], own_all[~internal][b_order]])
     neighbour = N[internal][oi]
     # compact the points (drop points used by no face: inside solid blocks)
     used = np.zeros(P.shape[0], bool)

@@ -542,7 +542,8 @@ def resample_to_grid(
 def _format_of(path: Path, fmt: str | None) -> str:
     if fmt is not None:
         if fmt not in ("npz", "netcdf", "fluent", "openfoam", "vtk"):
-            raise ValueError(f"format must be 'npz', 'netcdf', 'fluent', 'openfoam' or 'vtk', got {fmt!r}")
+            raise ValueError(f"format must be 'npz', 'netcdf' or 'fluent', or 'openfoam' for a case directory, "
+                             f"or 'vtk' for .vtu/.vtk/.vtm; got {fmt!r}")
         return fmt
     from .openfoam import is_openfoam_case
 

@@ -215,7 +215,7 @@ def test_npz_velocity_array_and_format_override(tmp_path):
         np.savez(fh, x=x, y=y, z=z, velocity=vel)
     a = read_field_arrays(path, format="npz")
     np.testing.assert_array_equal(a.velocity, vel)
-    with pytest.raises(ValueError, match="format must be 'npz', 'netcdf', 'fluent'"):
+    with pytest.raises(ValueError, match="format must be 'npz', 'netcdf' or 'fluent'"):
         read_field_arrays(path, format="stl")
     with pytest.raises(ValueError, match="spacing and shape apply to scattered Fluent exports"):
         read_field_arrays(path, format="npz", spacing=1.0)
