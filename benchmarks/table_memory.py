@@ -111,7 +111,31 @@ def main() -> None:
         lines.append(f"| {r} | {s['run_MB']:.0f} | {s['extra_MB']:.0f} | {a['extra_MB']:.0f} |")
     (res / "table_memory.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    plot(rows, res / "table_memory.png")
+
+
+def plot(rows, path) -> None:
+    """Extra peak memory against the number of runs, both ways."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    for mode, style in (("streamed", "o-"), ("all-at-once", "s--")):
+        sel = [r for r in rows if r["mode"] == mode]
+        ax.plot([r["runs"] for r in sel], [r["extra_MB"] for r in sel], style, label=mode)
+    ax.set_xlabel("CFD runs in the table")
+    ax.set_ylabel("peak memory while building (MB)")
+    ax.set_title(f"runs of {rows[0]['run_MB']:.0f} MB ({'x'.join(map(str, rows[0]['grid']))} float64)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
 
 
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:] == ["--plot-only"]:
+        res = Path(__file__).parent / "results"
+        plot(json.loads((res / "table_memory.json").read_text()), res / "table_memory.png")
+    else:
+        main()
