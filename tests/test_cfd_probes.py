@@ -22,7 +22,7 @@ from lidarjax.io import (
 
 SCENE = lj.scenes.hemisphere(radius=20.0, speed=10.0, direction=250.0)
 SCAN = lj.windcube_v2()
-HEIGHTS = np.array([10.0, 40.0, 80.0])
+HEIGHTS = np.array([20.0, 40.0, 60.0, 80.0])  # as the real case below: shared compilations
 MOUNTS = [lj.Mount([4.0, 3.0, 20.1], beta=0.0, gamma=5.0, psi=180.0, epsilon=21.0),
           lj.Mount([-3.0, 6.0, 20.1], beta=30.0, gamma=5.0, psi=180.0, epsilon=21.0, pitch=2.0)]
 U_REF = 10.0 * np.asarray(lj.scenes.heading(250.0))
@@ -83,7 +83,7 @@ def test_locations_are_named_weighted_and_where_simulate_looks(case):
         # focus points are simulate's own
         focus_node = q // 2
         foc = beams[locs.node[beams] == focus_node]
-        np.testing.assert_allclose(locs.points[foc].reshape(3, 5, 3), np.asarray(ref.points),
+        np.testing.assert_allclose(locs.points[foc].reshape(4, 5, 3), np.asarray(ref.points),
                                    atol=1e-12)
         point = rows[locs.beam[rows] == -1]
         np.testing.assert_allclose(locs.points[point][:, 2] - 20.1, HEIGHTS, atol=1e-12)
@@ -135,7 +135,7 @@ def test_probes_outside_the_mesh_are_flagged_not_bridged(case, tmp_path):
                                    probe=probe, u_ref=U_REF)
     assert np.isnan(np.asarray(sims[1].los)[1, 2]) and np.isnan(np.asarray(sims[1].cff_U)[1])
     assert int(sims[1].flags[1]) & int(lj.Flag.BEAM_OUTSIDE)
-    np.testing.assert_allclose(np.asarray(sims[1].los)[[0, 2]], np.asarray(refs[1].los)[[0, 2]],
+    np.testing.assert_allclose(np.asarray(sims[1].los)[[0, 2, 3]], np.asarray(refs[1].los)[[0, 2, 3]],
                                atol=1e-12)
     assert_same(sims[:1], refs[:1])
 
@@ -212,7 +212,7 @@ def test_cli_writes_then_reads_back(tmp_path, capsys):
     cols = read_table_csv(tmp_path / "r" / "simulation_30.csv").columns
     assert (tmp_path / "r" / "windcube simulation 30 degrees.dat").is_file()
     mount = lj.Mount(locs_xyz[1], beta=30.0, gamma=5.0, psi=180.0, epsilon=21.0)
-    ref = lj.simulate(SCENE, SCAN, mount, HEIGHTS, u_ref=U_REF)  # the point probe
+    ref = lj.simulate(SCENE, SCAN, mount, [10.0, 40.0, 80.0], u_ref=U_REF)  # the point probe
     np.testing.assert_allclose(cols["U_mag_lidar"], np.asarray(ref.lidar_speed), atol=1e-12)
     np.testing.assert_allclose(cols["cff_U"], np.asarray(ref.cff_U), atol=1e-12)
     np.testing.assert_allclose(cols["cfp_th"], np.asarray(ref.cfp_th), atol=1e-10)
@@ -236,7 +236,7 @@ def test_real_openfoam_probes_output_reads_back_through_the_forward_model():
 
     settings = read_settings(REAL / "settings.dat")
     mounts = settings_mounts(settings, [0.0, 90.0])
-    heights = np.array([20.0, 40.0, 60.0, 80.0])
+    heights = HEIGHTS
     probe = lj.PulsedProbe()
     locs = lj.probe_locations(SCAN, mounts, heights, probe)
     written = read_probe_csv(REAL / "lidarProbes.csv")
