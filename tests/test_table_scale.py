@@ -1,6 +1,7 @@
 """build_table at scale: one run in memory at a time (cropped to where the beams look), and
 the same table from a Dask cluster."""
 
+import functools
 import gc
 import tracemalloc
 import weakref
@@ -20,8 +21,15 @@ X = np.linspace(-60, 60, 41)
 Z = np.linspace(0, 70, 15)
 
 
+@functools.cache
+def _velocity(beta):
+    grid = lj.GridField.from_function(lj.scenes.hemisphere(20.0, 15.0, 90.0 + beta).sample, X, X, Z)
+    return np.asarray(grid.velocity)
+
+
 def run_field(beta):
-    return lj.GridField.from_function(lj.scenes.hemisphere(20.0, 15.0, 90.0 + beta).sample, X, X, Z)
+    """A fresh GridField of the run at `beta` (its own device arrays on every call)."""
+    return lj.GridField(X, X, Z, _velocity(beta))
 
 
 class Tracker:
