@@ -166,7 +166,10 @@ else:  # turbine: a Windcube per lidar of the points file, LOS vs OpenFOAM's pro
                           grid=list(rep.shape), los_rms=float(np.sqrt(np.mean(d ** 2))),
                           los_max=float(np.abs(d).max()), n_points=int(d.size),
                           resample_error_rms=rep.resample_error_rms)
-out["peak_rss_gb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+# VmHWM: this process's own peak (ru_maxrss would include the forking parent's)
+hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM")]
+out["peak_rss_gb"] = (int(hwm[0].split()[1]) / 1e6 if hwm
+                      else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
 print("RESULT" + json.dumps(out))
 """
 
