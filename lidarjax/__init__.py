@@ -14,6 +14,10 @@ from .batch import simulate_sectors as simulate_sectors
 from .batch import stack_fields as stack_fields
 from .batch import stack_mounts as stack_mounts
 from .batch import unstack_field as unstack_field
+from .cfd_probes import ProbeField as ProbeField
+from .cfd_probes import ProbeLocations as ProbeLocations
+from .cfd_probes import probe_locations as probe_locations
+from .cfd_probes import simulate_from_probes as simulate_from_probes
 from .corrections import correction_factors as correction_factors
 from .field import AbstractField as AbstractField
 from .field import GridField as GridField

@@ -21,7 +21,7 @@ from .forward import Simulation, simulate
 from .io.settings import Settings
 from .mount import Mount
 
-__all__ = ["seed_columns", "simulate_settings", "build_table", "correct_records",
+__all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "correct_records",
            "write_corrected_csv", "CorrectedRecords", "SEED_U_REF"]
 
 #: The free stream hard-coded in the seed UDF (its CFD inlet), CFD frame, m/s.
@@ -107,18 +107,107 @@ def build_table(
     *,
     u_ref=SEED_U_REF,
     probe=None,
+    client=None,
+    progress: bool = False,
 ):
     """A `lidarjax.ResponseTable` from the CFD runs of a seed settings file.
 
     Each platform rotation ``beta`` is one inflow direction; the table's directions are the
     free streams' meteorological directions in the north frame. Returns ``(table, sims)``.
+
+    Runs are loaded **one at a time**: each `GridField` returned by `field_for_beta` is cut
+    at once to `scan_bounds` of all mounts (with the probe; `GridField.crop`, bit-exact),
+    simulated, and dropped, so the peak memory is about one run whatever their number.
+    `field_for_beta` may load only that region itself (``lidarjax.io.load_field(path,
+    region=...)``, with `table_region` giving it); any other `AbstractField` (an analytic
+    scene) is used as it is.
+
+    **Arguments** (besides those of `simulate_settings`):
+
+    - `client`: a ``dask.distributed.Client``; runs are then read and simulated in parallel
+      on its workers (`field_for_beta` is shipped to them, so it must be picklable by
+      cloudpickle and read files the workers can see). The workers must use the caller's
+      ``jax_enable_x64`` setting (checked: the command line sets it on them). The table is
+      identical to the serial one.
+    - `progress`: one line per finished run on stderr (run, beta, grid before and after the
+      crop, seconds).
     """
+    import sys
+
     from .response import ResponseTable
 
-    sims = simulate_settings(settings, betas, field_for_beta, scan, u_ref=u_ref, probe=probe)
-    table = ResponseTable.from_simulations(list(sims.values()),
-                                           mount=settings_mounts(settings, list(sims)))
+    betas = [float(b) for b in betas]
+    mounts = settings_mounts(settings, betas)
+    heights = np.asarray(settings.heights())
+    lo, hi = table_region(settings, betas, scan, probe=probe)
+    u_ref = np.asarray(u_ref, np.float64)
+    tasks = [(b, m) for b, m in zip(betas, mounts, strict=True)]
+    run = _TableRun(field_for_beta, scan, heights, u_ref, probe, lo, hi)
+    sims: dict[float, Simulation] = {}
+
+    def report(k, result):
+        b, sim, info = result
+        sims[b] = sim
+        if progress:
+            print(f"table: run {k}/{len(betas)} beta {b:g}: grid {info['shape']} -> crop "
+                  f"{info['crop']} in {info['seconds']:.1f} s", file=sys.stderr)
+
+    if client is None:
+        for k, task in enumerate(tasks, 1):
+            report(k, run(task))
+    else:
+        from .io._common import import_optional
+
+        distributed = import_optional("distributed", "dask", "build_table(client=...)")
+        futures = client.map(run, tasks, pure=False)
+        for k, fut in enumerate(distributed.as_completed(futures), 1):
+            report(k, fut.result())
+        want = np.dtype(jnp.zeros(()).dtype)
+        got = {np.dtype(np.asarray(s.los).dtype) for s in sims.values()}
+        if got != {want}:
+            raise ValueError(
+                f"build_table: the dask workers computed in {', '.join(map(str, got))} but this "
+                f"process uses {want}; set the same jax_enable_x64 on the workers, e.g. "
+                "client.run(jax.config.update, 'jax_enable_x64', True)")
+    sims = {b: sims[b] for b in betas}
+    table = ResponseTable.from_simulations(list(sims.values()), mount=mounts)
     return table, sims
+
+
+def table_region(settings: Settings, betas: Sequence[float], scan, *, probe=None):
+    """``(lo, hi)`` absolute CFD metres: the box every mount of `settings` at `betas` samples
+    (`lidarjax.scan_bounds` of all of them with the probe and the point reference); the
+    region to load from each CFD run."""
+    from .footprint import scan_bounds
+
+    mounts = settings_mounts(settings, [float(b) for b in betas])
+    return scan_bounds(scan, mounts, np.asarray(settings.heights()), probe=probe)
+
+
+class _TableRun:
+    """One run of `build_table`: load, crop to the region, simulate, return host arrays.
+    A plain class (not a closure) so dask can ship it to workers."""
+
+    def __init__(self, field_for_beta, scan, heights, u_ref, probe, lo, hi):
+        self.field_for_beta = field_for_beta
+        self.scan, self.heights, self.u_ref, self.probe = scan, heights, u_ref, probe
+        self.lo, self.hi = lo, hi
+
+    def __call__(self, task):
+        import time
+
+        beta, mount = task
+        t0 = time.perf_counter()
+        field = self.field_for_beta(beta)
+        shape = getattr(field, "shape", None)
+        if isinstance(field, GridField):
+            field = field.crop(self.lo, self.hi)
+        crop = getattr(field, "shape", None)
+        sim = simulate(field, self.scan, mount, jnp.asarray(self.heights), u_ref=self.u_ref,
+                       probe=self.probe)
+        del field
+        sim = jax.tree_util.tree_map(np.asarray, sim)
+        return beta, sim, {"shape": shape, "crop": crop, "seconds": time.perf_counter() - t0}
 
 
 @dataclasses.dataclass(frozen=True)

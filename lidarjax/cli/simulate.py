@@ -30,13 +30,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from pathlib import Path
-
-    from ..io import read_settings, write_netcdf, write_seed_output, write_table_csv
-    from ..io._common import have_module
+    from ..io import read_settings
     from ..io.fields import load_field
-    from ..io.seed_output import SEED_UNITS, format_number
-    from ..workflow import seed_columns, simulate_settings
+    from ..workflow import simulate_settings
 
     settings = read_settings(args.settings)
     betas = selected_betas(args, settings)
@@ -47,13 +43,28 @@ def run(args) -> int:
     probe = make_probe(args)
     sims = simulate_settings(settings, betas, lambda b: load_field(paths[b]), scan,
                              u_ref=args.u_ref, probe=probe)
+    write_results(args, settings, sims, {b: str(p) for b, p in paths.items()})
+    return 0
+
+
+def write_results(args, settings, sims, sources) -> None:
+    """Write the seed files and CSV (and NetCDF with xarray) tables of `sims` ({beta:
+    Simulation}) to ``args.out``; `sources` names each beta's CFD data in the metadata.
+    Shared with `lidarjax probes --sampled`."""
+    from pathlib import Path
+
+    from ..io import write_netcdf, write_seed_output, write_table_csv
+    from ..io._common import have_module
+    from ..io.seed_output import SEED_UNITS, format_number
+    from ..workflow import seed_columns
+
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"{'beta':>7s} {'file':<40s} {'U_lidar(top)':>13s} {'cff_U range':>18s}")
     for b, sim in sims.items():
         cols = seed_columns(sim)
         path = write_seed_output(out, b, cols, verbose=settings.verbose)
-        meta = {"settings": str(args.settings), "field": str(paths[b]), "scan": args.scan,
+        meta = {"settings": str(args.settings), "field": sources[b], "scan": args.scan,
                 "beta_deg": b, "gamma_deg": settings.gamma, "psi_deg": settings.psi,
                 "epsilon_deg": settings.epsilon, "u_ref_cfd_m_s": ",".join(map(str, args.u_ref)),
                 "directions": "Th_lidar/th_point: seed azimuth = (-atan2(v,u)) mod 360; "
@@ -61,9 +72,8 @@ def run(args) -> int:
         write_table_csv(out / f"simulation_{format_number(b)}.csv", cols, SEED_UNITS, meta)
         if have_module("xarray"):
             write_netcdf(out / f"simulation_{format_number(b)}.nc", cols, meta)
-        cff = cols["cff_U"]
-        print(f"{b:7.1f} {path.name:<40s} {cols['U_mag_lidar'][-1]:13.3f} "
-              f"{np.nanmin(cff):8.4f}..{np.nanmax(cff):8.4f}")
+        cff = cols["cff_U"][np.isfinite(cols["cff_U"])]
+        span = f"{cff.min():8.4f}..{cff.max():8.4f}" if cff.size else f"{'nan':>18s}"
+        print(f"{b:7.1f} {path.name:<40s} {cols['U_mag_lidar'][-1]:13.3f} {span}")
     extra = " and NetCDF" if have_module("xarray") else ""
     print(f"wrote {len(sims)} seed file(s), CSV{extra} table(s) to {out}")
-    return 0

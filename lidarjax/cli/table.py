@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ._common import add_run_arguments, field_paths, make_probe, make_scan
+from ._dask import add_dask_arguments, dask_client, region_loader
 
 
 def register(sub) -> None:
@@ -16,6 +17,7 @@ def register(sub) -> None:
     tab.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
     add_run_arguments(tab, default_scan="windcube_v2")
     tab.add_argument("--out", required=True, help="table file to write (.npz)")
+    add_dask_arguments(tab)
     tab.set_defaults(func=run)
 
 
@@ -25,7 +27,7 @@ def run(args) -> int:
 
     from ..io import read_settings, save_table
     from ..io.fields import load_field
-    from ..workflow import build_table
+    from ..workflow import build_table, table_region
 
     settings = read_settings(args.settings)
     betas = [float(b) for b in settings.betas]
@@ -35,8 +37,10 @@ def run(args) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         raise FileNotFoundError(f"output folder not found: {out.parent}")
-    table, _ = build_table(settings, betas, lambda b: load_field(paths[b]), scan,
-                           u_ref=args.u_ref, probe=probe)
+    region = table_region(settings, betas, scan, probe=probe)
+    with dask_client(args) as client:
+        table, _ = build_table(settings, betas, region_loader(load_field, paths, region), scan,
+                               u_ref=args.u_ref, probe=probe, client=client, progress=True)
     meta = {"settings": str(args.settings), "field": args.field, "scan": args.scan,
             "cone_angle_deg": float(scan.cone_angle), "probe": args.probe,
             "gamma_deg": settings.gamma, "psi_deg": settings.psi,

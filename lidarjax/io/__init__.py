@@ -4,6 +4,7 @@
 - `seed_output`: the seed's output table, its azimuth convention, CSV and NetCDF writers.
 - `sta`, `rtd`: Windcube 10-minute statistics and line-of-sight records.
 - `zephir`: ZephIR 10-minute CSV exports.
+- `probes`: CFD probe files (OpenFOAM probes dictionary and output, zCFD, CSV).
 - `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII, OpenFOAM cases) for
   `lidarjax.GridField`.
 - `openfoam`: OpenFOAM case directories (mesh + `U`, ASCII/binary/gzip) and OpenFOAM's own
@@ -30,6 +31,13 @@ from .openfoam import read_openfoam_field as read_openfoam_field
 from .openfoam import read_openfoam_mesh as read_openfoam_mesh
 from .openfoam import resample_openfoam as resample_openfoam
 from .openfoam import sample_openfoam as sample_openfoam
+from .probes import OpenFoamProbes as OpenFoamProbes
+from .probes import read_openfoam_probes as read_openfoam_probes
+from .probes import read_probe_csv as read_probe_csv
+from .probes import read_probe_values_csv as read_probe_values_csv
+from .probes import write_openfoam_probes as write_openfoam_probes
+from .probes import write_probe_csv as write_probe_csv
+from .probes import write_zcfd_probes as write_zcfd_probes
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord

@@ -12,6 +12,9 @@ data, nodes outside the data's convex hull).
 - a directory (or `format="openfoam"`): an OpenFOAM case (`constant/polyMesh` plus a
   time directory's `U`, ASCII or binary, plain or gzipped), sampled with the mesh's own
   cellPoint interpolation onto a grid resolving its cells (see `lidarjax.io.openfoam`);
+- `.vtu`, `.vtk`, `.vtm` (VTK unstructured grids, e.g. from `foamToVTK` or ParaView; cell
+  and/or point data): sampled inside their own cells like OpenFOAM cases (see
+  `lidarjax.io.vtk`; needs meshio: `pip install lidarjax[meshio]`);
 - anything else (`.csv`, `.txt`, `.dat`, `.ascii`): a Fluent ASCII export, whose header
   names `x-coordinate`, `y-coordinate`, `z-coordinate`, `x-velocity`, `y-velocity`,
   `z-velocity` in any order among other columns (`nodenumber`, `pressure` ...), comma or
@@ -61,6 +64,10 @@ __all__ = [
 DEFAULT_MAX_NODES_PER_AXIS = 128
 """Upper bound of the default grid size per axis for scattered data."""
 
+DEFAULT_MAX_EDGE_FACTOR = 4.0
+"""Scattered data: simplices whose longest edge exceeds this many local node spacings are
+taken as bridging a solid and masked (see `resample_to_grid`)."""
+
 _NETCDF_SUFFIXES = (".nc", ".nc4", ".cdf", ".netcdf")
 _FLUENT_NAMES = {
     "xcoordinate": 0,
@@ -104,6 +111,8 @@ class FieldLoadReport:
       points of the region (OpenFOAM cases; NaN otherwise). Near walls, where the velocity
       drops to zero across one cell, the maximum is dominated by the first cell layer.
     - `notes`: anything else worth knowing (a coarsened automatic grid ...).
+    - `masked_fraction`: scattered data: fraction of grid nodes inside the hull made NaN
+      because their Delaunay simplex bridged a gap (a solid) wider than the local spacing.
     """
 
     path: str
@@ -120,6 +129,7 @@ class FieldLoadReport:
     resample_error_rms: float = math.nan
     resample_error_max: float = math.nan
     notes: tuple[str, ...] = ()
+    masked_fraction: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -218,22 +228,39 @@ def _read_npz(path: Path) -> FieldArrays:
 def _read_netcdf(path: Path) -> FieldArrays:
     xr = import_optional("xarray", "netcdf", "Reading NetCDF fields")
     with xr.open_dataset(path) as ds:
-        missing = [n for n in ("x", "y", "z", "u", "v", "w") if n not in ds.variables]
-        if missing:
+        # names are matched case-insensitively (U, V, W on X, Y, Z work too)
+        by_lower: dict[str, list[str]] = {}
+        for name in ds.variables:
+            by_lower.setdefault(str(name).lower(), []).append(str(name))
+        names, missing, ambiguous = {}, [], []
+        for n in ("x", "y", "z", "u", "v", "w"):
+            hits = by_lower.get(n, [])
+            if not hits:
+                missing.append(n)
+            elif len(hits) > 1 and n not in hits:
+                ambiguous.append(" / ".join(hits))
+            else:
+                names[n] = n if n in hits else hits[0]
+        if missing or ambiguous:
+            found = ", ".join(sorted(str(v) for v in ds.variables)) or "none"
+            what = (f"missing variables {', '.join(missing)}" if missing
+                    else f"ambiguous variables {', '.join(ambiguous)}")
             raise ValueError(
-                f"{os.fspath(path)}: missing variables {', '.join(missing)}; expected u, v, w "
-                "on coordinates x, y, z"
+                f"{os.fspath(path)}: {what}; expected u, v, w on coordinates x, y, z (any case); "
+                f"found {found}"
             )
+        dims = [names[c] for c in "xyz"]
         comps = []
         for n in "uvw":
-            da = ds[n]
-            if set(da.dims) != {"x", "y", "z"}:
+            da = ds[names[n]]
+            if {str(d).lower() for d in da.dims} != {"x", "y", "z"} or len(da.dims) != 3:
                 raise ValueError(
-                    f"{os.fspath(path)}: variable {n} must have dimensions (x, y, z), got "
+                    f"{os.fspath(path)}: variable {names[n]} must have dimensions (x, y, z), got "
                     f"{da.dims}"
                 )
-            comps.append(np.asarray(da.transpose("x", "y", "z").values, dtype=np.float64))
-        x, y, z = (np.asarray(ds[c].values, dtype=np.float64) for c in "xyz")
+            order = [next(d for d in da.dims if str(d).lower() == c) for c in "xyz"]
+            comps.append(np.asarray(da.transpose(*order).values, dtype=np.float64))
+        x, y, z = (np.asarray(ds[c].values, dtype=np.float64) for c in dims)
     return _gridded(path, "netcdf", x, y, z, np.stack(comps, axis=-1))
 
 
@@ -245,9 +272,7 @@ def _fluent_header(line: str, path: Path, number: int) -> tuple[str | None, list
     cols = [-1] * 6
     for i, name in enumerate(names):
         slot = _FLUENT_NAMES.get(normalise_key(name))
-        if slot is not None:
-            if cols[slot] >= 0:
-                raise file_error(path, number, f"column {_FLUENT_REQUIRED[slot]!r} appears twice")
+        if slot is not None and cols[slot] < 0:  # a repeated column: the first one is used
             cols[slot] = i
     missing = [_FLUENT_REQUIRED[s] for s in range(6) if cols[s] < 0]
     if missing:
@@ -398,6 +423,7 @@ def resample_to_grid(
     spacing: float | Sequence[float] | None = None,
     shape: Sequence[int] | None = None,
     block_nodes: int = 1_000_000,
+    max_edge_factor: float = DEFAULT_MAX_EDGE_FACTOR,
 ) -> FieldArrays:
     """Piecewise-linear resampling of scattered velocities onto a regular grid.
 
@@ -414,9 +440,20 @@ def resample_to_grid(
     - `values`: `(n, 3)` velocities `(u, v, w)`, m/s.
     - `spacing`, `shape`: grid definition (at most one).
     - `block_nodes`: grid nodes evaluated per block (bounds memory).
+    - `max_edge_factor`: scattered data carry no connectivity, so the triangulation also
+      spans the holes the solids leave (buildings, a platform, terrain steps). A simplex
+      whose longest edge exceeds `max_edge_factor` times the local node spacing is refused:
+      grid nodes in it are NaN, never interpolated across a solid. A node's spacing is the
+      shortest of the longest edges of the simplices around it (its ordinary neighbourhood:
+      stretched cells keep their long edge, the rim of a hole its fluid-side size); a
+      simplex uses the largest of its four nodes' (2:1 refinement interfaces pass).
+      ``inf`` keeps every simplex. The
+      longest edge is used rather than the circumradius, which is unbounded for the flat
+      slivers a Delaunay triangulation of a regular lattice contains.
 
     **Returns:** `FieldArrays`; `report.outside_fraction` is the fraction of nodes
-    outside the hull.
+    outside the hull, and `report.notes` says how many simplices and grid nodes were
+    masked as bridging a gap.
     """
     from scipy.spatial import Delaunay, QhullError
 
@@ -442,6 +479,24 @@ def resample_to_grid(
         tri = Delaunay(pts - lo)  # shift to the box corner: better conditioned at UTM offsets
     except QhullError as err:
         raise ValueError(f"cannot triangulate the points (all in a plane?): {err}") from None
+    bridge = None
+    masked_nodes = 0
+    if not max_edge_factor > 0:
+        raise ValueError(f"max_edge_factor must be positive, got {max_edge_factor!r}")
+    if np.isfinite(max_edge_factor):
+        simp = tri.simplices
+        longest = np.zeros(simp.shape[0])
+        for a in range(4):
+            for b in range(a + 1, 4):
+                edge = np.linalg.norm(pts[simp[:, a]] - pts[simp[:, b]], axis=1)
+                np.maximum(longest, edge, out=longest)
+        # a node's spacing: the shortest of the longest edges of its simplices (its finest
+        # ordinary neighbourhood; stretched cells keep their long edge, the rim of a hole
+        # keeps its fluid-side size); a simplex takes the largest of its four nodes' (so
+        # simplices across a 2:1 refinement interface pass)
+        node_size = np.full(pts.shape[0], np.inf)
+        np.minimum.at(node_size, simp.ravel(), np.repeat(longest, 4))
+        bridge = longest > max_edge_factor * node_size[simp].max(axis=1)
     shape3 = tuple(a.size for a in axes)
     grid = np.full((*shape3, 3), np.nan)
     out = grid.reshape(-1, 3)
@@ -458,6 +513,11 @@ def resample_to_grid(
         inside_total += int(np.count_nonzero(inside))
         if not np.any(inside):
             continue
+        if bridge is not None:
+            inside &= ~bridge[np.where(inside, simplex, 0)]
+            masked_nodes += int(np.count_nonzero((simplex >= 0) & ~inside))
+            if not np.any(inside):
+                continue
         s = simplex[inside]
         transform = tri.transform[s]
         b = np.einsum("mij,mj->mi", transform[:, :3, :], q[inside] - transform[:, 3, :])
@@ -470,21 +530,28 @@ def resample_to_grid(
         n_points=int(pts.shape[0]),
         outside_fraction=1.0 - inside_total / n_nodes,
         nan_fraction=_nan_fraction(grid),
+        notes=() if bridge is None else (
+            f"{int(bridge.sum())} of {bridge.size} Delaunay simplices bridge a gap (longest edge > "
+            f"{max_edge_factor:g} x local spacing) and were masked: {masked_nodes} grid nodes "
+            f"({masked_nodes / n_nodes:.2%}) NaN",),
+        masked_fraction=masked_nodes / n_nodes,
     )
     return FieldArrays(axes[0], axes[1], axes[2], grid, report)
 
 
 def _format_of(path: Path, fmt: str | None) -> str:
     if fmt is not None:
-        if fmt not in ("npz", "netcdf", "fluent", "openfoam"):
+        if fmt not in ("npz", "netcdf", "fluent", "openfoam", "vtk"):
             raise ValueError(f"format must be 'npz', 'netcdf' or 'fluent', or 'openfoam' for a case directory, "
-                             f"got {fmt!r}")
+                             f"or 'vtk' for .vtu/.vtk/.vtm; got {fmt!r}")
         return fmt
     from .openfoam import is_openfoam_case
 
     if path.is_dir() or is_openfoam_case(path):
         return "openfoam"
     suffix = path.suffix.lower()
+    if suffix in (".vtu", ".vtk", ".vtm"):
+        return "vtk"
     if suffix == ".npz":
         return "npz"
     if suffix in _NETCDF_SUFFIXES:
@@ -502,6 +569,7 @@ def read_field_arrays(
     chunk_rows: int = 200_000,
     region: tuple[Any, Any] | None = None,
     time: Any = None,
+    max_edge_factor: float = DEFAULT_MAX_EDGE_FACTOR,
 ) -> FieldArrays:
     """Read a velocity field as numpy arrays (see the module docstring for the formats).
 
@@ -520,6 +588,8 @@ def read_field_arrays(
     - `time`: OpenFOAM time (number or directory name); default the latest holding `U`.
     - `progress`: progress bar while reading a Fluent export (tqdm, if installed).
     - `chunk_rows`: rows per parsing chunk for Fluent exports.
+    - `max_edge_factor`: Fluent exports: Delaunay simplices longer than this many local
+      node spacings are taken as bridging a solid and masked (see `resample_to_grid`).
 
     OpenFOAM cases are sampled with the mesh's own cellPoint interpolation (the values that
     OpenFOAM's `probes` function object reports; see `lidarjax.io.openfoam`), at the nodes of
@@ -541,6 +611,11 @@ def read_field_arrays(
                              "an OpenFOAM case, or nothing for the automatic grid")
         return _read_openfoam_arrays(p, region, spacing, time)
     p = require_file(path, "field file")
+    if kind == "vtk":
+        if shape is not None or time is not None:
+            raise ValueError(f"{os.fspath(p)}: a VTK file takes spacing (metres) and region, "
+                             "not shape or time")
+        return _read_openfoam_arrays(p, region, spacing, None, vtk=True)
     if time is not None:
         raise ValueError(f"{os.fspath(p)}: time applies to OpenFOAM cases only")
     if kind != "fluent":
@@ -558,7 +633,8 @@ def read_field_arrays(
         keep = np.all((points >= lo - margin) & (points <= hi + margin), axis=1)
         points, velocity = points[keep], velocity[keep]
     try:
-        arrays = resample_to_grid(points, velocity, spacing=spacing, shape=shape)
+        arrays = resample_to_grid(points, velocity, spacing=spacing, shape=shape,
+                                  max_edge_factor=max_edge_factor)
     except ValueError as err:
         raise ValueError(f"{os.fspath(p)}: {err}") from None
     report = dataclasses.replace(arrays.report, path=os.fspath(p), format="fluent")
@@ -572,6 +648,7 @@ def load_field(
     spacing: float | Sequence[float] | None = None,
     shape: Sequence[int] | None = None,
     time: Any = None,
+    max_edge_factor: float = DEFAULT_MAX_EDGE_FACTOR,
     progress: bool = False,
     format: str | None = None,
     dtype: Any = None,
@@ -593,7 +670,7 @@ def load_field(
 
     arrays = read_field_arrays(
         path, spacing=spacing, shape=shape, progress=progress, format=format, region=region,
-        time=time,
+        time=time, max_edge_factor=max_edge_factor,
     )
     velocity = arrays.velocity if dtype is None else arrays.velocity.astype(dtype)
     field = GridField(arrays.x, arrays.y, arrays.z, velocity)
@@ -629,14 +706,20 @@ def _crop_arrays(arrays: FieldArrays, region: Any) -> FieldArrays:
     return FieldArrays(arrays.x[sl[0]], arrays.y[sl[1]], arrays.z[sl[2]], vel, report)
 
 
-def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any) -> FieldArrays:
+def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any, vtk: bool = False
+                          ) -> FieldArrays:
     from .openfoam import read_openfoam_field, resample_openfoam
 
-    of = read_openfoam_field(path, time=time)
+    if vtk:  # VTK unstructured grids: the same cellPoint sampling (lidarjax.io.vtk)
+        from .vtk import read_vtk_field
+
+        of = read_vtk_field(path)
+    else:
+        of = read_openfoam_field(path, time=time)
     box = None if region is None else _region_box(region)
     axes, vel, info = resample_openfoam(of, box, spacing)
     report = FieldLoadReport(
-        path=os.fspath(of.case), format="openfoam", shape=vel.shape[:3],  # type: ignore[arg-type]
+        path=os.fspath(of.case), format="vtk" if vtk else "openfoam", shape=vel.shape[:3],  # type: ignore[arg-type]
         n_points=int(of.mesh.points.shape[0]), outside_fraction=0.0, nan_fraction=_nan_fraction(vel),
         spacing_min=info["spacing_min"], spacing_max=info["spacing_max"], n_cells=of.mesh.n_cells,
         n_cells_used=info["n_cells_used"], time=of.time,

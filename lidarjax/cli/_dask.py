@@ -1,0 +1,76 @@
+"""Scale-out options of the commands that read many CFD runs: a Dask cluster and the region
+each run is read in."""
+
+from __future__ import annotations
+
+import contextlib
+
+
+def add_dask_arguments(parser) -> None:
+    """``--workers N`` (a local Dask cluster) and ``--scheduler ADDRESS`` (an existing one)."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="read and simulate the runs in parallel on a local Dask cluster of "
+                            "N worker processes (needs: pip install lidarjax[dask])")
+    group.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="use an existing Dask cluster, e.g. tcp://10.0.0.5:8786 (the "
+                            "workers must see the CFD files at the same paths)")
+
+
+def _set_x64(flag: bool) -> None:
+    import jax
+
+    jax.config.update("jax_enable_x64", bool(flag))
+
+
+@contextlib.contextmanager
+def dask_client(args):
+    """A ``distributed.Client`` for ``--workers`` / ``--scheduler`` (None without them), with
+    the command's float precision (``--x64``) set on every worker."""
+    if args.workers is None and args.scheduler is None:
+        yield None
+        return
+    from ..io._common import import_optional
+
+    distributed = import_optional("distributed", "dask", "--workers / --scheduler")
+    if args.workers is not None:
+        if args.workers < 1:
+            raise ValueError(f"--workers must be at least 1, got {args.workers}")
+        cluster = distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1,
+                                           processes=True, dashboard_address=None)
+    else:
+        cluster = None
+    try:
+        client = distributed.Client(cluster if cluster is not None else args.scheduler)
+    except OSError as err:
+        if cluster is not None:
+            cluster.close()
+        raise ValueError(f"cannot reach the Dask scheduler {args.scheduler}: {err}") from None
+    try:
+        client.run(_set_x64, bool(getattr(args, "x64", True)))
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+class _RegionLoader:
+    """``beta -> GridField``: `load` of that beta's file, reading only `region` where the
+    reader supports it (a plain class so Dask can ship it)."""
+
+    def __init__(self, load, paths, region):
+        import inspect
+
+        self.load, self.paths, self.region = load, dict(paths), region
+        self.takes_region = "region" in inspect.signature(load).parameters
+
+    def __call__(self, beta):
+        if self.takes_region:
+            return self.load(self.paths[beta], region=self.region)
+        return self.load(self.paths[beta])
+
+
+def region_loader(load, paths, region):
+    """A picklable loader of the run of each beta restricted to `region` ``(lo, hi)``."""
+    return _RegionLoader(load, paths, region)

@@ -1,0 +1,417 @@
+"""VTK unstructured grids (`.vtu`, legacy `.vtk`, `.vtm` multiblock), sampled inside their
+own cells.
+
+`foamToVTK` and ParaView write a CFD solution as an unstructured grid: cells (tetrahedra,
+hexahedra, prisms, pyramids, polyhedra), cell data (the solver's cell values) and point
+data (values interpolated to the mesh points; `foamToVTK`'s are OpenFOAM's own
+`volPointInterpolation`). lidarjax turns the cells into a face-based mesh (faces shared by
+two cells found by their vertices) and samples it with the same cellPoint interpolation as
+OpenFOAM cases (`lidarjax.io.openfoam`, `lidarjax.io._cells`): each cell cut into
+tetrahedra (cell centre, two points of a face and the face's base point), values mixed from
+the cell value at the cell centre and the point values at the corners. So a `foamToVTK`
+export of the internal mesh with both cell and point data samples as OpenFOAM's `probes`
+(`interpolationScheme cellPoint`) would, and no value is ever interpolated across a solid:
+points in no cell are NaN.
+
+- cell and point data: used as they are;
+- cell data only: point values by inverse-distance weighting of the surrounding cell
+  centres (OpenFOAM's interior rule; boundary points take their cells' values, so a wall's
+  no-slip value is not seen);
+- point data only: the cell value is the mean of the cell's point values.
+
+`.vtu` files are read by a small reader of VTK's XML format here (inline ascii or base64
+binary, optionally zlib-compressed, and appended raw or base64 data; polyhedra included,
+which meshio cannot mix with other cells); legacy `.vtk` files with meshio (`pip install
+lidarjax[meshio]`). `.vtm` multiblock files are read directly (XML) and every volume block
+(`.vtu`, `.vtk`) they list is merged; surface blocks (`.vtp`, boundary patches) are
+skipped.
+
+Two limits of the format, measured on real `foamToVTK` (v1912) output: its points are
+float32, so at UTM coordinates the mesh moves by up to 0.25-0.5 m (on `turbineSiting`,
+sampled velocities then differ from the case's own by up to 2.1 m/s next to the terrain,
+0.04 m/s rms); and a VTK hexahedron does not keep the point order of OpenFOAM's faces, which
+sets where OpenFOAM cuts a cell into tetrahedra, so inside cells the piecewise-linear
+interpolant may differ from OpenFOAM's own (cell centres, cell and point values are the
+same). Read the OpenFOAM case itself where it is at hand. Velocity is the point/cell array named
+`U` (or `velocity`, `Velocity`, `V`, case-insensitive) with three components, in m/s in
+the CFD frame; coordinates in metres.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from ._cells import (
+    BoundaryValues,
+    CellPointSampler,
+    PolyMesh,
+    _faces_of_cells,
+    _gather_face_points,
+    build_sampler,
+)
+from ._common import PathLike, import_optional
+from .openfoam import OpenFOAMField
+
+__all__ = ["VTK_SUFFIXES", "VTKField", "read_vtk_field"]
+
+VTK_SUFFIXES = (".vtu", ".vtk", ".vtm")
+_NAMES = ("u", "velocity", "v", "vel")
+
+# outward-or-inward faces of the linear VTK cells (orientation is fixed numerically)
+_FACES = {
+    "tetra": ((0, 1, 3), (1, 2, 3), (2, 0, 3), (0, 2, 1)),
+    "hexahedron": ((0, 4, 7, 3), (1, 2, 6, 5), (0, 1, 5, 4), (3, 7, 6, 2), (0, 3, 2, 1), (4, 5, 6, 7)),
+    "wedge": ((0, 1, 2), (3, 5, 4), (0, 3, 4, 1), (1, 4, 5, 2), (2, 5, 3, 0)),
+    "pyramid": ((0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
+}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class VTKField(OpenFOAMField):
+    """A VTK unstructured grid ready for cellPoint sampling (an `OpenFOAMField` whose point
+    values, when the file has them, are the file's own). `point_values`: ``(P, 3)`` or None."""
+
+    point_values: np.ndarray | None = None
+
+    def sampler(self, cells: np.ndarray | None = None) -> CellPointSampler:
+        if cells is None:
+            cells = np.arange(self.mesh.n_cells)
+        cells = np.asarray(cells, np.int64)
+        s = build_sampler(self.mesh, self.cell_values, self.boundary, cells)
+        if self.point_values is None:
+            return s
+        # the points build_sampler used, in its order: those of the region cells' faces
+        in_region = np.zeros(self.mesh.n_cells, bool)
+        in_region[cells] = True
+        flat, _, _ = _gather_face_points(self.mesh, _faces_of_cells(self.mesh, in_region))
+        pmask = np.zeros(self.mesh.points.shape[0], bool)
+        pmask[flat] = True
+        return dataclasses.replace(s, point_value=self.point_values[np.flatnonzero(pmask)])
+
+
+def _pick(data: dict, what: str, path: Path) -> np.ndarray | None:
+    for key, arr in data.items():
+        if str(key).lower() in _NAMES:
+            a = np.asarray(arr, np.float64)
+            if a.ndim == 2 and a.shape[1] >= 3:
+                return a[:, :3]
+    return None
+
+
+def _blocks(path: Path) -> list[Path]:
+    if path.suffix.lower() != ".vtm":
+        return [path]
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as err:
+        raise ValueError(f"{os.fspath(path)}: not a readable .vtm multiblock file ({err})") from None
+    files = [Path(path.parent, d.get("file")) for d in root.iter("DataSet") if d.get("file")]
+    vol = [f for f in files if f.suffix.lower() in (".vtu", ".vtk")]
+    if not vol:
+        raise ValueError(f"{os.fspath(path)}: the multiblock lists no volume (.vtu/.vtk) block; "
+                         f"found {', '.join(f.name for f in files) or 'none'}")
+    missing = [os.fspath(f) for f in vol if not f.is_file()]
+    if missing:
+        raise FileNotFoundError(f"{os.fspath(path)}: block file(s) not found: {', '.join(missing)}")
+    return vol
+
+
+def _cell_faces(mesh, path: Path):
+    """Per face occurrence: owning cell, padded vertex ids ``(n, k)``, sizes; plus the
+    per-cell data blocks and cell count."""
+    cells_faces, cell_ids, sizes = [], [], []
+    n_cells = 0
+    kept_blocks = []
+    for b, block in enumerate(mesh.cells):
+        ctype = block.type
+        if ctype in _FACES:
+            conn = np.asarray(block.data, np.int64)
+            for face in _FACES[ctype]:
+                f = conn[:, face]
+                cells_faces.append(f)
+                cell_ids.append(n_cells + np.arange(conn.shape[0]))
+                sizes.append(np.full(conn.shape[0], len(face)))
+            kept_blocks.append(b)
+            n_cells += conn.shape[0]
+        elif ctype.startswith("polyhedron"):
+            for c, faces in enumerate(block.data):
+                for face in faces:
+                    cells_faces.append(np.asarray(face, np.int64)[None, :])
+                    cell_ids.append(np.array([n_cells + c]))
+                    sizes.append(np.array([len(face)]))
+            kept_blocks.append(b)
+            n_cells += len(block.data)
+        # vertices, lines, surface cells: not part of the volume mesh
+    if n_cells == 0:
+        raise ValueError(f"{os.fspath(path)}: no volume cells (tetra, hexahedron, wedge, pyramid, "
+                         "polyhedron) in the file")
+    width = max(f.shape[1] for f in cells_faces)
+    pad = np.concatenate([np.pad(f, ((0, 0), (0, width - f.shape[1])), constant_values=-1)
+                          for f in cells_faces])
+    return pad, np.concatenate(cell_ids), np.concatenate(sizes), n_cells, kept_blocks
+
+
+def _poly_mesh(points: np.ndarray, pad, cell_of, sizes, n_cells, path: Path) -> PolyMesh:
+    key = np.sort(np.where(pad < 0, np.iinfo(np.int64).max, pad), axis=1)
+    _, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True,
+                                          return_counts=True)
+    inverse = inverse.reshape(-1)
+    if np.any(counts > 2):
+        raise ValueError(f"{os.fspath(path)}: {int((counts > 2).sum())} faces are shared by more "
+                         "than two cells; the grid is not a valid volume mesh")
+    owner = np.full(counts.size, np.iinfo(np.int64).max)
+    np.minimum.at(owner, inverse, cell_of)
+    neighbour = np.full(counts.size, -1)
+    np.maximum.at(neighbour, inverse, cell_of)
+    neighbour[counts == 1] = -1
+    # the owner's occurrence gives the vertex order; orient it out of the owner
+    occ = np.flatnonzero(cell_of == owner[inverse])
+    occ = occ[np.unique(inverse[occ], return_index=True)[1]]
+    verts, nv = pad[occ], sizes[occ]
+    centroid = np.zeros((n_cells, 3))
+    np.add.at(centroid, cell_of, np.where((pad >= 0)[..., None], points[np.maximum(pad, 0)], 0).sum(1)
+              / sizes[:, None])
+    centroid /= np.maximum(np.bincount(cell_of, minlength=n_cells), 1)[:, None]
+    valid = verts >= 0
+    p = points[np.maximum(verts, 0)]
+    fc = np.where(valid[..., None], p, 0).sum(1) / nv[:, None]
+    nxt = np.where(np.arange(verts.shape[1])[None, :] + 1 < nv[:, None],
+                   np.arange(verts.shape[1])[None, :] + 1, 0)
+    pn = np.take_along_axis(p, nxt[..., None], axis=1)
+    normal = np.where(valid[..., None], np.cross(p - fc[:, None], pn - fc[:, None]), 0).sum(1)
+    flip = np.einsum("ij,ij->i", normal, fc - centroid[owner]) < 0
+    for i in np.flatnonzero(flip):
+        verts[i, : nv[i]] = verts[i, : nv[i]][::-1]
+    internal = neighbour >= 0
+    order = np.concatenate([np.flatnonzero(internal)[np.argsort(owner[internal], kind="stable")],
+                            np.flatnonzero(~internal)])
+    verts, nv = verts[order], nv[order]
+    offsets = np.zeros(order.size + 1, np.int64)
+    np.cumsum(nv, out=offsets[1:])
+    labels = verts[verts >= 0]
+    n_int = int(internal.sum())
+    return PolyMesh(points=points, face_offsets=offsets, face_labels=labels, owner=owner[order],
+                    neighbour=neighbour[order][:n_int], n_cells=n_cells,
+                    patches=(("boundary", "patch", n_int, int(order.size - n_int)),))
+
+
+_VTK_TYPES = {"Float32": "<f4", "Float64": "<f8", "Int8": "<i1", "UInt8": "<u1", "Int16": "<i2",
+              "UInt16": "<u2", "Int32": "<i4", "UInt32": "<u4", "Int64": "<i8", "UInt64": "<u8"}
+_VTK_CELL_FACES = {10: "tetra", 12: "hexahedron", 13: "wedge", 14: "pyramid"}
+_VTK_CELL_NODES = {"tetra": 4, "hexahedron": 8, "wedge": 6, "pyramid": 5}
+
+
+class _VtuReader:
+    """Just enough of VTK's XML UnstructuredGrid format: inline ascii / binary (base64,
+    optionally zlib-compressed) and appended (raw or base64) data arrays."""
+
+    def __init__(self, path: Path):
+        import base64
+        import zlib
+
+        self.path, self._b64, self._zlib = path, base64, zlib
+        data = path.read_bytes()
+        self.appended = b""
+        self.appended_b64 = False
+        k = data.find(b"<AppendedData")
+        if k >= 0:
+            head_end = data.index(b">", k)
+            self.appended_b64 = b"base64" in data[k:head_end]
+            start = data.index(b"_", head_end) + 1
+            stop = data.rfind(b"</AppendedData>")
+            self.appended = data[start: stop if stop > 0 else len(data)]
+            if self.appended_b64:
+                self.appended = self.appended.strip()
+            data = data[:k] + b"</VTKFile>"
+        try:
+            self.root = ET.fromstring(data)
+        except ET.ParseError as err:
+            raise ValueError(f"{os.fspath(path)}: not a readable VTK XML file ({err})") from None
+        if self.root.get("type") != "UnstructuredGrid":
+            raise ValueError(f"{os.fspath(path)}: a VTK {self.root.get('type')} file; expected an "
+                             "UnstructuredGrid (.vtu)")
+        self.header = np.dtype("<u8" if self.root.get("header_type") == "UInt64" else "<u4")
+        if self.root.get("byte_order", "LittleEndian") != "LittleEndian":
+            self.header = self.header.newbyteorder(">")
+        self.compressed = self.root.get("compressor") is not None
+        self.big = self.root.get("byte_order") == "BigEndian"
+
+    def _decode(self, raw: bytes, dtype: np.dtype) -> np.ndarray:
+        h = self.header
+        if not self.compressed:
+            n = int(np.frombuffer(raw[: h.itemsize], h)[0])
+            return np.frombuffer(raw[h.itemsize: h.itemsize + n], dtype)
+        nb = int(np.frombuffer(raw[: h.itemsize], h)[0])
+        head = np.frombuffer(raw[: h.itemsize * (3 + nb)], h)
+        sizes = head[3:]
+        pos = h.itemsize * (3 + nb)
+        out = []
+        for c in sizes:
+            out.append(self._zlib.decompress(raw[pos: pos + int(c)]))
+            pos += int(c)
+        return np.frombuffer(b"".join(out), dtype)
+
+    def _b64_blocks(self, text: bytes, dtype: np.dtype) -> np.ndarray:
+        b64 = self._b64
+        h = self.header
+        if not self.compressed:
+            return self._decode(b64.b64decode(text), dtype)
+        # header and data are encoded separately; the header's length follows its first word
+        first = b64.b64decode(text[: 4 * ((h.itemsize + 2) // 3 + 1)])
+        nb = int(np.frombuffer(first[: h.itemsize], h)[0])
+        hlen = 4 * ((h.itemsize * (3 + nb) + 2) // 3)
+        head = b64.b64decode(text[:hlen])
+        return self._decode(head + b64.b64decode(text[hlen:]), dtype)
+
+    def array(self, el) -> np.ndarray:
+        dtype = np.dtype(_VTK_TYPES[el.get("type")])
+        if self.big:
+            dtype = dtype.newbyteorder(">")
+        fmt = el.get("format", "ascii")
+        if fmt == "ascii":
+            a = np.array((el.text or "").split(), dtype=np.float64).astype(dtype)
+        elif fmt == "binary":
+            a = self._b64_blocks("".join((el.text or "").split()).encode(), dtype)
+        elif fmt == "appended":
+            off = int(el.get("offset"))
+            if self.appended_b64:
+                a = self._b64_blocks(self.appended[off:], dtype)
+            else:
+                a = self._decode(self.appended[off:], dtype)
+        else:
+            raise ValueError(f"{os.fspath(self.path)}: unknown DataArray format {fmt!r}")
+        nc = int(el.get("NumberOfComponents", "1"))
+        return a.reshape(-1, nc) if nc > 1 else a
+
+    def arrays(self, section: str) -> dict[str, np.ndarray]:
+        piece = self.root.find("UnstructuredGrid/Piece")
+        node = piece.find(section) if piece is not None else None
+        if node is None:
+            return {}
+        return {el.get("Name", ""): el for el in node.findall("DataArray")}
+
+
+def _read_vtu(path: Path):
+    r = _VtuReader(path)
+    pts_el = r.arrays("Points")
+    if not pts_el:
+        raise ValueError(f"{os.fspath(path)}: no Points in the UnstructuredGrid")
+    points = np.asarray(r.array(next(iter(pts_el.values()))), np.float64).reshape(-1, 3)
+    cells = r.arrays("Cells")
+    try:
+        conn = r.array(cells["connectivity"]).astype(np.int64)
+        offs = r.array(cells["offsets"]).astype(np.int64)
+        types = r.array(cells["types"]).astype(np.int64)
+    except KeyError as err:
+        raise ValueError(f"{os.fspath(path)}: Cells lack the {err} array") from None
+    starts = np.concatenate([[0], offs[:-1]])
+    face_parts, cell_parts, size_parts = [], [], []
+    keep = np.zeros(types.size, bool)
+    for code, name in _VTK_CELL_FACES.items():
+        sel = np.flatnonzero(types == code)
+        if sel.size == 0:
+            continue
+        keep[sel] = True
+        nodes = conn[starts[sel][:, None] + np.arange(_VTK_CELL_NODES[name])]
+        for face in _FACES[name]:
+            face_parts.append(nodes[:, face])
+            cell_parts.append(sel)
+            size_parts.append(np.full(sel.size, len(face)))
+    poly = np.flatnonzero(types == 42)
+    if poly.size:
+        if "faces" not in cells or "faceoffsets" not in cells:
+            raise ValueError(f"{os.fspath(path)}: polyhedral cells without faces/faceoffsets")
+        stream = r.array(cells["faces"]).astype(np.int64)
+        foffs = r.array(cells["faceoffsets"]).astype(np.int64)
+        fstarts = np.concatenate([[0], np.maximum.accumulate(np.maximum(foffs, 0))[:-1]])
+        for c in poly:
+            pos = fstarts[c]
+            for _ in range(int(stream[pos])):
+                n = int(stream[pos + 1])
+                face_parts.append(stream[pos + 2: pos + 2 + n][None, :])
+                cell_parts.append(np.array([c]))
+                size_parts.append(np.array([n]))
+                pos += 1 + n
+        keep[poly] = True
+    if not keep.any():
+        raise ValueError(f"{os.fspath(path)}: no volume cells (tetra, hexahedron, wedge, pyramid, "
+                         "polyhedron)")
+    # number the kept (volume) cells 0..n-1
+    new = np.cumsum(keep) - 1
+    width = max(f.shape[1] for f in face_parts)
+    pad = np.concatenate([np.pad(f, ((0, 0), (0, width - f.shape[1])), constant_values=-1)
+                          for f in face_parts])
+    cell_of = new[np.concatenate(cell_parts)]
+    sizes = np.concatenate(size_parts)
+    pdata = {k: r.array(v) for k, v in r.arrays("PointData").items()}
+    cdata = {k: r.array(v)[keep] for k, v in r.arrays("CellData").items()}
+    return points, pad, cell_of, sizes, int(keep.sum()), pdata, cdata
+
+
+def _read_legacy(path: Path):
+    meshio = import_optional("meshio", "meshio", "Reading legacy .vtk files")
+    try:
+        m = meshio.read(path, file_format="vtk")
+    except Exception as err:  # meshio raises many types for unreadable files
+        raise ValueError(f"{os.fspath(path)}: not a readable legacy VTK file ({err})") from None
+    pad, cell_of, sizes, nc, kept = _cell_faces(m, path)
+    cdata = {}
+    for key, blocks in m.cell_data.items():
+        parts = [np.asarray(blocks[b]) for b in kept]
+        cdata[str(key)] = np.concatenate(parts)
+    return (np.asarray(m.points, np.float64)[:, :3], pad, cell_of, sizes, nc,
+            {str(k): np.asarray(v) for k, v in m.point_data.items()}, cdata)
+
+
+
+def read_vtk_field(path: PathLike) -> VTKField:
+    """Read a `.vtu`, legacy `.vtk` or `.vtm` file's volume cells and velocity (see the
+    module docstring). Raises `ValueError` naming the file for a file without volume cells
+    or without a three-component velocity array (listing the arrays found)."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"VTK file not found: {os.fspath(p)}")
+    pts_all, pad_all, cell_all, size_all, cval_all, pval_all = [], [], [], [], [], []
+    n_pts = n_cells = 0
+    for f in _blocks(p):
+        reader = _read_vtu if f.suffix.lower() == ".vtu" else _read_legacy
+        points_f, pad, cell_of, sizes, nc, pdata, cdata = reader(f)
+        pv, cv = _pick(pdata, "point", f), _pick(cdata, "cell", f)
+        if pv is None and cv is None:
+            found = sorted(set(pdata) | set(cdata))
+            raise ValueError(f"{os.fspath(f)}: no velocity array (U, velocity, V with 3 "
+                             f"components) in the point or cell data; found {', '.join(found) or 'none'}")
+        pts_all.append(points_f)
+        pad_all.append(np.where(pad >= 0, pad + n_pts, -1))
+        cell_all.append(cell_of + n_cells)
+        size_all.append(sizes)
+        cval_all.append(cv)
+        pval_all.append(pv)
+        n_pts += points_f.shape[0]
+        n_cells += nc
+    points = np.concatenate(pts_all)
+    pad = np.concatenate([np.pad(a, ((0, 0), (0, max(b.shape[1] for b in pad_all) - a.shape[1])),
+                                 constant_values=-1) for a in pad_all])
+    cell_of, sizes = np.concatenate(cell_all), np.concatenate(size_all)
+    mesh = _poly_mesh(points, pad, cell_of, sizes, n_cells, p)
+    have_points = all(v is not None for v in pval_all)
+    point_values = np.concatenate(pval_all) if have_points else None
+    if all(v is not None for v in cval_all):
+        cell_values = np.concatenate(cval_all)
+    elif point_values is not None:  # mean of the cell's points (each point counted once)
+        flat_cell = np.repeat(cell_of, (pad >= 0).sum(1))
+        flat_pt = pad[pad >= 0]
+        pairs = np.unique(flat_cell * np.int64(points.shape[0]) + flat_pt)
+        c, q = pairs // points.shape[0], pairs % points.shape[0]
+        cell_values = np.zeros((n_cells, 3))
+        np.add.at(cell_values, c, point_values[q])
+        cell_values /= np.bincount(c, minlength=n_cells)[:, None]
+    else:
+        raise ValueError(f"{os.fspath(p)}: blocks mix cell-data-only and point-data-only velocity")
+    return VTKField(case=p, time="", field="U", mesh=mesh, cell_values=cell_values,
+                    boundary=BoundaryValues({"boundary": "cell"}), point_values=point_values)
