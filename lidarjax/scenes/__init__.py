@@ -2,6 +2,8 @@
 
 - `lidarjax.scenes.analytic`: the validation flows (uniform, power law, linear, hemisphere,
   hill), all linear in the free stream.
+- `lidarjax.scenes.farm`: wind-farm wakes (`WindFarm`: top-hat Jensen or Gaussian wakes,
+  yaw deflection, turbine interaction), non-linear in direction.
 
 Every scene is an `AbstractField` (CFD frame: ``+x`` east, ``+y`` north, ``+z`` up, metres
 and m/s; directions meteorological), dynamic and differentiable in all its parameters.
@@ -18,3 +20,7 @@ from .analytic import hill as hill
 from .analytic import linear as linear
 from .analytic import power_law as power_law
 from .analytic import uniform as uniform
+from .farm import FarmState as FarmState
+from .farm import WindFarm as WindFarm
+from .farm import overlap_area as overlap_area
+from .farm import wind_farm as wind_farm
