@@ -87,7 +87,7 @@ from jaxtyping import Array, ArrayLike, Float
 from .._precision import default_float, is_concrete, split
 from ..field import AbstractField
 
-__all__ = ["WindFarm", "FarmState", "wind_farm", "overlap_area", "MODELS", "COMBINATIONS",
+__all__ = ["WindFarm", "FarmState", "wind_farm", "overlap_area", "to_floris", "MODELS", "COMBINATIONS",
            "DEFAULT_EXPANSION"]
 
 MODELS = ("top_hat", "gaussian")
@@ -387,7 +387,7 @@ class WindFarm(AbstractField):
         return self._deficit(dx, dy, dz, 0.5 * self.diameter, state.induction, cte, self.diameter)
 
     def streamwise_local(self, points: Float[Array, "... 3"], state: FarmState | None = None
-                         ) -> Float[Array, "..."]:
+                         ) -> Float[Array, ...]:
         """Speed along the free-stream heading (m/s) at local points: ``U(h) (1 - combined)``;
         NaN below the ground datum."""
         h = points[..., 2]
@@ -551,3 +551,72 @@ def _first_duplicate(e, n):
         if same.size:
             return i, i + 1 + int(same[0])
     return None
+
+
+def to_floris(farm: WindFarm, *, turbulence_intensity: float = 0.06):
+    """The same farm as a FLORIS (``floris>=4``) model, for validation and benchmarks.
+
+    The conventions that map one package onto the other (all verified to round-off by
+    tests/test_farm.py):
+
+    - coordinates: FLORIS's ``layout_x``/``layout_y`` are `WindFarm.x` / `WindFarm.y` (the
+      turbines relative to ``farm.origin``, m, ``x`` east, ``y`` north) and FLORIS ``z`` is
+      the height above the ground datum ``origin[2]``; sample FLORIS at local points;
+    - direction: both meteorological, FLORIS's 270 blowing towards ``+x``; FLORIS rotates
+      about the centre of the layout's bounding box, lidarjax about the origin (a shift
+      along and across the wind: nothing changes);
+    - yaw: the same angle and sign (positive anticlockwise seen from above, wake to the
+      right of the wind);
+    - Jensen's ``we`` is `WindFarm.expansion`; Jimenez's ``kd``, ``ad``, ``bd`` are `kd`,
+      `ad`, `bd`; FLORIS's NUM_EPS (1 mm) is lidarjax's `EPS`;
+    - thrust: the ``cosine-loss`` operation model with ``ref_tilt = 0`` (Ct cos(yaw) and
+      the induction of the module docs); FLORIS reads its curve at the rotor-grid cubic
+      mean and returns 1e-4 outside the curve, lidarjax at the exact rotor average (top
+      hat) and holds the end values;
+    - shear: ``wind_shear = alpha``, ``reference_wind_height = z_ref``;
+    - combination: ``sum_of_squares`` is ``sosfs``, ``linear`` is ``fls``, ``max`` is ``max``;
+    - no secondary steering, yaw-added recovery or transverse velocities (FLORIS's GCH
+      additions, absent from the Jensen/Jimenez model).
+
+    Only the top-hat model has a FLORIS twin (FLORIS's ``gauss`` is Bastankhah & Porte-Agel
+    2016 with a near-wake core, not the 2014 model here). Needs the ``farm`` extra
+    (``pip install lidarjax[farm]``).
+    """
+    try:
+        from floris import FlorisModel
+    except ImportError as err:  # pragma: no cover - depends on the environment
+        raise ImportError("to_floris needs FLORIS: pip install 'lidarjax[farm]'") from err
+    if farm.model != "top_hat":
+        raise ValueError("to_floris: only the top-hat (Jensen) model has a FLORIS twin.")
+    comb = {"sum_of_squares": "sosfs", "linear": "fls", "max": "max"}[farm.combination]
+    f = lambda a: np.asarray(a, np.float64)  # noqa: E731
+    turbines = []
+    for k in range(farm.n_turbines):
+        turbines.append({
+            "turbine_type": f"lidarjax_{k}", "hub_height": float(farm.hub_height[k]),
+            "rotor_diameter": float(farm.diameter[k]), "TSR": 8.0,
+            "operation_model": "cosine-loss",
+            "power_thrust_table": {
+                "ref_air_density": 1.225, "ref_tilt": 0.0, "cosine_loss_exponent_yaw": 1.88,
+                "cosine_loss_exponent_tilt": 1.88, "wind_speed": f(farm.ct_speed[k]).tolist(),
+                "power": [0.0] * farm.ct_speed.shape[1],
+                "thrust_coefficient": f(farm.ct_value[k]).tolist()},
+        })
+    d = FlorisModel("defaults").core.as_dict()
+    d["wake"]["model_strings"].update(velocity_model="jensen", deflection_model="jimenez",
+                                      combination_model=comb, turbulence_model="crespo_hernandez")
+    d["wake"]["enable_secondary_steering"] = False
+    d["wake"]["enable_yaw_added_recovery"] = False
+    d["wake"]["enable_transverse_velocities"] = False
+    d["wake"]["wake_velocity_parameters"]["jensen"] = {"we": float(farm.expansion)}
+    d["wake"]["wake_deflection_parameters"]["jimenez"] = {
+        "kd": float(farm.kd), "ad": float(farm.ad), "bd": float(farm.bd)}
+    d["flow_field"]["wind_shear"] = float(farm.alpha)
+    d["flow_field"]["reference_wind_height"] = float(farm.z_ref)
+    d["farm"]["layout_x"] = f(farm.x).tolist()
+    d["farm"]["layout_y"] = f(farm.y).tolist()
+    d["farm"]["turbine_type"] = turbines
+    model = FlorisModel(d)
+    model.set(wind_directions=[float(farm.direction)], wind_speeds=[float(farm.speed)],
+              turbulence_intensities=[turbulence_intensity], yaw_angles=f(farm.yaw)[None])
+    return model
