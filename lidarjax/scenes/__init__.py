@@ -22,5 +22,6 @@ from .analytic import power_law as power_law
 from .analytic import uniform as uniform
 from .farm import FarmState as FarmState
 from .farm import WindFarm as WindFarm
+from .farm import nacelle_mount as nacelle_mount
 from .farm import overlap_area as overlap_area
 from .farm import wind_farm as wind_farm

@@ -87,7 +87,8 @@ from jaxtyping import Array, ArrayLike, Float
 from .._precision import default_float, is_concrete, split
 from ..field import AbstractField
 
-__all__ = ["WindFarm", "FarmState", "wind_farm", "overlap_area", "to_floris", "MODELS", "COMBINATIONS",
+__all__ = ["WindFarm", "FarmState", "wind_farm", "overlap_area", "to_floris", "nacelle_mount",
+           "MODELS", "COMBINATIONS",
            "DEFAULT_EXPANSION"]
 
 MODELS = ("top_hat", "gaussian")
@@ -620,3 +621,38 @@ def to_floris(farm: WindFarm, *, turbulence_intensity: float = 0.06):
     model.set(wind_directions=[float(farm.direction)], wind_speeds=[float(farm.speed)],
               turbulence_intensities=[turbulence_intensity], yaw_angles=f(farm.yaw)[None])
     return model
+
+
+def nacelle_mount(farm: WindFarm, index: int, *, backward: bool = False, north: bool = False,
+                  offset: float = 0.0):
+    """A `lidarjax.Mount` for a nacelle lidar on turbine `index` of `farm`, at its hub,
+    yawed with the rotor and looking along the rotor axis (``pitch = -90``).
+
+    - forward (default): the instrument axis points upstream, to bearing
+      ``direction - yaw`` (`WindFarm.rotor_heading`); ``backward=True`` turns it 180 degrees
+      to look downstream into the turbine's own wake;
+    - `offset`: metres along the looking direction from the hub (e.g. negative for a lidar
+      on the nacelle roof behind the rotor);
+    - `north`: report directions in the north frame (``epsilon`` = the lidar heading);
+      by default (False) they are relative to the lidar's axis, so the reported direction of
+      a forward lidar is the yaw misalignment (wind direction minus rotor heading, use
+      `lidarjax.wrap180`).
+
+    Dynamic in the farm (direction, yaw): use it inside `jax.vmap` over directions. The
+    location is kept exact at UTM coordinates (the farm's origin plus the local hub)."""
+    import equinox as eqx
+
+    from ..mount import Mount
+
+    heading = farm.rotor_heading()[index] + (180.0 if backward else 0.0)
+    h = jnp.deg2rad(heading)
+    ahead = jnp.stack([jnp.sin(h), jnp.cos(h), jnp.zeros_like(h)])
+    local = farm.hub_points()[index] + offset * ahead
+    mount = Mount(np.zeros(3), pitch=-90.0)
+    dt = farm.dtype
+    return eqx.tree_at(
+        lambda m: (m.location, m.location_lo, m.psi, m.epsilon, m.pitch),
+        mount,
+        (farm.origin, farm.origin_lo + local.astype(dt), heading.astype(dt),
+         (heading if north else jnp.zeros_like(heading)).astype(dt), jnp.asarray(-90.0, dt)),
+    )
