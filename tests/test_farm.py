@@ -6,11 +6,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import central_difference
 
 import lidarjax as lj
 from lidarjax.scenes import farm as fm
-
-from helpers import central_difference
 
 RNG = np.random.default_rng(14)
 
@@ -152,26 +151,29 @@ def test_reference_points_and_heading():
 
 
 # --------------------------------------------------------------------------------- gradients
-GAUSS = lj.scenes.wind_farm([0.0, 560.0, 1100.0], [0.0, 40.0, -30.0], 90.0, 126.0,
+GAUSS = lj.scenes.wind_farm([0.0, 560.0, 1100.0], [0.0, 0.0, -30.0], 90.0, 126.0,
                             ct=(np.array([4.0, 8.0, 12.0]), np.array([0.85, 0.78, 0.5])),
                             yaw=[15.0, -5.0, 0.0], speed=9.0, direction=265.0, alpha=0.12,
                             model="gaussian", ad=-4.5, bd=-0.01)
-PROBE_PTS = jnp.array([[1500.0, 10.0, 95.0], [800.0, -60.0, 60.0], [1200.0, 30.0, 120.0]])
+# in the far wake, at the disc planes, just behind and just ahead of a disc, on a centre line
+PROBE_PTS = jnp.array([[1500.0, 10.0, 95.0], [800.0, -60.0, 60.0], [1200.0, 30.0, 120.0],
+                       [0.0, 0.0, 90.0], [560.0 + 1e-9, 0.0, 90.0], [555.0, 0.0, 90.0],
+                       [30.0, 0.0, 90.0]])
 
 
 NAMES = ("x", "y", "yaw", "ct_value", "speed", "direction")
 
 
-def _loss(farm):
+def _loss(farm, pts):
     def loss(params):
         import equinox as eqx
         f = eqx.tree_at(lambda g: tuple(getattr(g, n) for n in NAMES), farm, tuple(params))
-        return jnp.sum(f.streamwise_local(PROBE_PTS) ** 2) + jnp.sum(f.solve().inflow)
+        return jnp.sum(f.streamwise_local(pts) ** 2) + jnp.sum(f.solve().inflow)
     return jax.jit(loss)
 
 
-def _check_grads(farm, steps, rtol):
-    loss = _loss(farm)
+def _check_grads(farm, steps, rtol, pts=PROBE_PTS):
+    loss = _loss(farm, pts)
     p0 = [jnp.asarray(getattr(farm, n)) for n in NAMES]
     grads = jax.grad(loss)(p0)
     for k, (name, eps) in enumerate(zip(NAMES, steps, strict=True)):
@@ -186,32 +188,16 @@ def _check_grads(farm, steps, rtol):
 
 
 def test_gaussian_gradients_match_fd():
+    """Finite everywhere (disc planes, aligned turbines, upstream) and equal to centred
+    differences, for positions, yaw, thrust curve, speed and direction."""
     _check_grads(GAUSS, (1e-3, 1e-3, 1e-4, 1e-6, 1e-6, 1e-5), 2e-5)
-
-
-def test_gaussian_gradients_finite_everywhere():
-    """At the disc plane, on centre lines, at aligned turbines, upstream: finite."""
-    import equinox as eqx
-    farm = lj.scenes.wind_farm([0.0, 500.0], [0.0, 0.0], 90.0, 126.0, ct=0.99, model="gaussian")
-    pts = jnp.array([[0.0, 0.0, 90.0], [500.0, 0.0, 90.0], [1e-9, 0.0, 90.0], [-50.0, 0.0, 90.0],
-                     [30.0, 0.0, 90.0], [250.0, 63.0, 90.0]])
-    names = NAMES + ("diameter",)
-
-    def loss(params):
-        f = eqx.tree_at(lambda g: tuple(getattr(g, n) for n in names), farm, tuple(params))
-        return jnp.sum(f.streamwise_local(pts)) + jnp.sum(f.solve().inflow)
-    grads = jax.jit(jax.grad(loss))([getattr(farm, n) for n in names])
-    for name, g in zip(names, grads, strict=True):
-        assert np.all(np.isfinite(np.asarray(g))), name
-    gp = jax.vmap(jax.jacrev(farm.sample_local))(pts)
-    assert np.all(np.isfinite(np.asarray(gp)))
 
 
 def test_top_hat_gradients_away_from_edges():
     farm = lj.scenes.wind_farm([0.0, 560.0, 1100.0], [0.0, 40.0, -30.0], 90.0, 126.0,
                                ct=(np.array([4.0, 8.0, 12.0]), np.array([0.85, 0.78, 0.5])),
                                yaw=[15.0, -5.0, 0.0], speed=9.0, direction=265.0)
-    _check_grads(farm, (1e-3, 1e-3, 1e-4, 1e-6, 1e-6, 1e-6), 1e-5)
+    _check_grads(farm, (1e-3, 1e-3, 1e-4, 1e-6, 1e-6, 1e-6), 1e-5, PROBE_PTS[:3])
 
 
 # ------------------------------------------------------------------- precision and batching
@@ -223,7 +209,7 @@ def test_float32_at_utm():
     kw = dict(ct=0.8, speed=8.0, direction=268.0, model="gaussian")
     f64 = lj.scenes.wind_farm(e, n, 90.0, 126.0, **kw)
     f32 = lj.scenes.wind_farm(e, n, 90.0, 126.0, dtype=jnp.float32, **kw)
-    u64, u32 = np.asarray(f64.sample(pts)), np.asarray(f32.sample(pts))
+    u64, u32 = np.asarray(f64.sample(pts)), np.asarray(f32.sample(pts))  # compiled once each
     assert u32.dtype == np.float32
     np.testing.assert_allclose(u32, u64, atol=2e-5 * 8.0)
 
@@ -242,8 +228,6 @@ def test_ground_lidar_simulate_and_table():
     k270, k90 = int(np.argmin(np.abs(directions - 270))), int(np.argmin(np.abs(directions - 90)))
     assert float(sims.lidar_speed[k270, 1]) < 9.0
     np.testing.assert_allclose(sims.lidar_speed[k90], 10.0, rtol=1e-9)
-    one = lj.simulate(fields[k270], scan, mount, heights, u_ref=u_refs[k270])
-    np.testing.assert_allclose(one.los, sims.los[k270], rtol=1e-12)
     table = lj.ResponseTable.from_simulations(sims, mount=mount)
     assert table.n_directions == directions.size
     # jit + vmap + grad through simulate w.r.t. the direction

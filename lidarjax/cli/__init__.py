@@ -11,10 +11,12 @@ import argparse
 import sys
 
 from . import correct, demo, simulate, table
+from . import farm as farm
 from ._common import enable_x64
 
 #: The command modules, in the order `--help` lists them.
 COMMANDS = (demo, simulate, table, correct)
+COMMANDS += (farm,)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -5,6 +5,8 @@
 - `sta`, `rtd`: Windcube 10-minute statistics and line-of-sight records.
 - `zephir`: ZephIR 10-minute CSV exports.
 - `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII) for `lidarjax.GridField`.
+- `layout`: wind-farm layouts (seed 004's `<name> <easting> <northing>`), turbine types,
+  probe-point CSVs.
 
 Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/write),
 `progress` (tqdm progress bars). Each raises an `ImportError` naming the extra when used
@@ -19,6 +21,11 @@ from .fields import read_fluent_points as read_fluent_points
 from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
+from .layout import FarmLayout as FarmLayout
+from .layout import read_farm as read_farm
+from .layout import read_layout as read_layout
+from .layout import read_turbine_type as read_turbine_type
+from .layout import write_probe_points as write_probe_points
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord

@@ -38,10 +38,14 @@ the rotated offsets from the hub, ``dy`` measured from the deflected centre line
   changes nothing physical and makes the two agree to round-off).
 - ``"gaussian"`` (Bastankhah & Porte-Agel 2014): ``C exp(-(dy^2 + dz^2) / (2 sigma^2))`` with
   ``sigma = k dx + 0.2 sqrt(beta) D``, ``beta = (1 + sqrt(1 - Ct')) / (2 sqrt(1 - Ct'))`` and
-  ``C = 1 - sqrt(1 - Ct' D^2 / (8 sigma^2))``, ``Ct' = Ct cos(yaw)``. Two smoothings keep it
-  differentiable everywhere: the square root's argument is floored smoothly
-  (``(s + sqrt(s^2 + 1e-4)) / 2``; it only matters in the near wake where the model is not
-  valid) and the deficit is switched on over the first rotor diameter behind the disc by
+  ``C = 1 - sqrt(1 - Ct' D^2 / (8 sigma^2))``, ``Ct' = Ct cos(yaw)``. In the near wake
+  (``Ct' D^2 / (8 sigma^2) > 1`` for ``Ct'`` above about 0.3 within a few diameters) the
+  formula is not valid and reaches full blockage; ``C`` is therefore capped at momentum
+  theory's fully expanded deficit ``2a`` by a smooth minimum
+  (``(C + 2a - sqrt((C - 2a)^2 + 1e-4)) / 2``; 5e-5 below ``C`` where the cap does not bind,
+  i.e. everywhere past about 3-4 D). Two more smoothings keep it differentiable everywhere:
+  the square root's argument is floored smoothly (``(s + sqrt(s^2 + 1e-4)) / 2``) and the
+  deficit is switched on over the first rotor diameter behind the disc by
   ``1 - exp(-(2 dx / D)^2)`` (0 and flat at the disc, 0.98 at ``dx = D``), so nothing is
   discontinuous at the rotor plane.
 
@@ -313,6 +317,8 @@ class WindFarm(AbstractField):
         arg = 1.0 - ct_eff * diam * diam / (8.0 * sigma * sigma)
         arg = 0.5 * (arg + jnp.sqrt(arg * arg + _SQRT_FLOOR**2))
         amp = 1.0 - jnp.sqrt(arg)
+        cap = 2.0 * a  # momentum theory's far-wake deficit: BPA exceeds it in the near wake
+        amp = 0.5 * (amp + cap - jnp.sqrt((amp - cap) ** 2 + _SQRT_FLOOR**2))
         onset = 1.0 - jnp.exp(-((2.0 * dxs / diam) ** 2))
         value = amp * onset * jnp.exp(-(dy * dy + dz * dz) / (2.0 * sigma * sigma))
         return jnp.where(ahead, value, 0.0)
@@ -327,7 +333,11 @@ class WindFarm(AbstractField):
         return jnp.where(pos, jnp.sqrt(jnp.where(pos, s, 1.0)), 0.0)
 
     def solve(self) -> FarmState:
-        """Solve the turbines in upstream order: rotor-averaged inflow, Ct and induction."""
+        """Solve the turbines in upstream order: rotor-averaged inflow, Ct and induction.
+        (Compiled once per farm structure: the number of turbines, curve length, model.)"""
+        return _solve_jit(self)
+
+    def _solve(self) -> FarmState:
         dtype = self.dtype
         xr, yr, _ = jnp.moveaxis(self.rotated(jnp.stack(
             [self.x, self.y, self.hub_height], -1)), -1, 0)
@@ -391,6 +401,11 @@ class WindFarm(AbstractField):
                          ) -> Float[Array, ...]:
         """Speed along the free-stream heading (m/s) at local points: ``U(h) (1 - combined)``;
         NaN below the ground datum."""
+        if state is None:
+            return _streamwise_jit(self, points)
+        return self._streamwise(points, state)
+
+    def _streamwise(self, points, state):
         h = points[..., 2]
         u = self.free_speed(h) * (1.0 - self._combine(self.deficits(points, state), -1))
         return jnp.where(h >= 0, u, jnp.nan)
@@ -413,6 +428,16 @@ class WindFarm(AbstractField):
     def rotor_heading(self) -> Float[Array, " i"]:
         """Bearing (degrees clockwise from north) each rotor faces: ``direction - yaw``."""
         return self.direction - self.yaw
+
+
+@eqx.filter_jit
+def _solve_jit(farm: WindFarm) -> FarmState:
+    return farm._solve()
+
+
+@eqx.filter_jit
+def _streamwise_jit(farm: WindFarm, points):
+    return farm._streamwise(points, farm._solve())
 
 
 def _curves(ct, n: int) -> tuple[np.ndarray, np.ndarray]:
