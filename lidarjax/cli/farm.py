@@ -124,6 +124,7 @@ def run(args) -> int:
     import numpy as np
 
     from .. import scan as scans
+    from ..batch import simulate_sectors
     from ..forward import simulate
     from ..io._common import atomic_write_text
     from ..io.layout import read_farm, write_probe_points
@@ -191,16 +192,18 @@ def run(args) -> int:
         m = nacelle_mount(f, k_nac, backward=args.backward) if nacelle else ground
         return f, m
 
-    def one(direction):
-        f, m = at(direction)
-        u_ref = f.speed * heading(direction, f.dtype)
-        return simulate(f, scan, m, hts, u_ref=u_ref, probe=probe, point_reference=False)
-
     def reading(direction, yaw_deg):
         f, m = at(direction, yaw_deg)
         return simulate(f, scan, m, hts, probe=probe, point_reference=False).lidar_speed[0]
 
-    sims = jax.jit(jax.vmap(one))(jnp.asarray(dirs, farm.dtype))
+    run_dirs = dirs if args.map_direction is None else np.append(dirs, args.map_direction)
+    stacked = jax.vmap(lambda d: at(d)[0])(jnp.asarray(run_dirs, farm.dtype))
+    mounts = jax.vmap(lambda f: nacelle_mount(f, k_nac, backward=args.backward))(stacked) \
+        if nacelle else ground
+    u_refs = args.speed * np.stack([np.asarray(heading(d)) for d in run_dirs])
+    sims_all = simulate_sectors(stacked, scan, mounts, hts, u_refs=u_refs, probe=probe,
+                                point_reference=False)
+    sims = jax.tree_util.tree_map(lambda a: a[: dirs.size], sims_all)
     grad_yaw = np.asarray(jax.jit(jax.vmap(jax.grad(reading, argnums=1), in_axes=(0, None)))(
         jnp.asarray(dirs, farm.dtype), farm.yaw))
 
@@ -224,8 +227,7 @@ def run(args) -> int:
     k_map = int(np.nanargmax(np.abs(ratio[:, 0] - 1.0))) if args.map_direction is None else None
     map_dir = float(dirs[k_map]) if k_map is not None else float(args.map_direction)
     f_map, m_map = at(map_dir)
-    sim_map = simulate(f_map, scan, m_map, hts, probe=None, point_reference=False)
-    pts_abs = np.asarray(sim_map.points, np.float64)  # (h, b, 3) focus points, CFD
+    pts_abs = np.asarray(sims_all.points[k_map if k_map is not None else -1], np.float64)  # (h, b, 3)
     m_loc = np.asarray(m_map.location, np.float64) + np.asarray(m_map.location_lo, np.float64)
     lidar_local = m_loc - origin
     beams = np.stack([np.broadcast_to(lidar_local[:2], pts_abs[-1, :, :2].shape),

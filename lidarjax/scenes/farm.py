@@ -82,6 +82,8 @@ Gebraad et al. (2016), Wind Energy 19; IEC 61400-12-1 Annex A (see `lidarjax.sec
 
 from __future__ import annotations
 
+import copy
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -579,6 +581,15 @@ def _first_duplicate(e, n):
     return None
 
 
+_FLORIS_DEFAULTS: dict = {}
+
+
+def _floris_defaults(model_cls) -> dict:
+    if "d" not in _FLORIS_DEFAULTS:
+        _FLORIS_DEFAULTS["d"] = model_cls("defaults").core.as_dict()
+    return _FLORIS_DEFAULTS["d"]
+
+
 def to_floris(farm: WindFarm, *, turbulence_intensity: float = 0.06):
     """The same farm as a FLORIS (``floris>=4``) model, for validation and benchmarks.
 
@@ -628,7 +639,7 @@ def to_floris(farm: WindFarm, *, turbulence_intensity: float = 0.06):
                 "power": [0.0] * farm.ct_speed.shape[1],
                 "thrust_coefficient": f(farm.ct_value[k]).tolist()},
         })
-    d = FlorisModel("defaults").core.as_dict()
+    d = copy.deepcopy(_floris_defaults(FlorisModel))
     d["wake"]["model_strings"].update(velocity_model="jensen", deflection_model="jimenez",
                                       combination_model=comb, turbulence_model="crespo_hernandez")
     d["wake"]["enable_secondary_steering"] = False
