@@ -444,14 +444,16 @@ def _streamwise_jit(farm: WindFarm, points):
 
 def _curves(ct, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Thrust curves as ``(n, m)`` speed and Ct arrays (host, float64)."""
-    if isinstance(ct, int | float | np.floating) or np.ndim(ct) == 0:
+    if isinstance(ct, int | float | np.floating) or (
+            not isinstance(ct, list | tuple) and np.ndim(ct) == 0):
         v = float(ct)
         if not 0.0 <= v < 1.0:
             raise ValueError(f"wind_farm: constant `ct` must be in [0, 1), got {v}.")
         return np.tile([0.0, 100.0], (n, 1)), np.full((n, 2), v)
-    if isinstance(ct, tuple) and len(ct) == 2:
-        ct = [ct] * n
-    ct = list(ct)
+    if (isinstance(ct, tuple) and len(ct) == 2 and not isinstance(ct[0], tuple | list)
+            and np.ndim(ct[0]) == 1 and np.ndim(ct[1]) == 1):
+        ct = [ct] * n  # one (speeds, ct) curve for every turbine
+    ct = list(ct) if isinstance(ct, list | tuple) else list(np.asarray(ct))
     if len(ct) != n:
         raise ValueError(f"wind_farm: `ct` needs one thrust curve per turbine ({n}), got {len(ct)}.")
     curves = []
