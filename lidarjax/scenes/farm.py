@@ -442,6 +442,14 @@ def _streamwise_jit(farm: WindFarm, points):
     return farm._streamwise(points, farm._solve())
 
 
+def _is_1d(value) -> bool:
+    """A 1-D sequence of numbers (a curve's speeds or Ct), not a scalar or a curve."""
+    try:
+        return np.asarray(value, np.float64).ndim == 1
+    except (ValueError, TypeError):
+        return False
+
+
 def _curves(ct, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Thrust curves as ``(n, m)`` speed and Ct arrays (host, float64)."""
     if isinstance(ct, int | float | np.floating) or (
@@ -450,8 +458,7 @@ def _curves(ct, n: int) -> tuple[np.ndarray, np.ndarray]:
         if not 0.0 <= v < 1.0:
             raise ValueError(f"wind_farm: constant `ct` must be in [0, 1), got {v}.")
         return np.tile([0.0, 100.0], (n, 1)), np.full((n, 2), v)
-    if (isinstance(ct, tuple) and len(ct) == 2 and not isinstance(ct[0], tuple | list)
-            and np.ndim(ct[0]) == 1 and np.ndim(ct[1]) == 1):
+    if isinstance(ct, tuple) and len(ct) == 2 and _is_1d(ct[0]) and _is_1d(ct[1]):
         ct = [ct] * n  # one (speeds, ct) curve for every turbine
     ct = list(ct) if isinstance(ct, list | tuple) else list(np.asarray(ct))
     if len(ct) != n:
