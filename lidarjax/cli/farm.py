@@ -189,7 +189,7 @@ def run(args) -> int:
         f = eqx.tree_at(lambda g: g.direction, farm, jnp.asarray(direction, farm.dtype))
         if yaw_deg is not None:
             f = eqx.tree_at(lambda g: g.yaw, f, yaw_deg)
-        m = nacelle_mount(f, k_nac, backward=args.backward) if nacelle else ground
+        m = nacelle_mount(f, k_nac, backward=args.backward, north=True) if nacelle else ground
         return f, m
 
     def reading(direction, yaw_deg):
@@ -198,7 +198,7 @@ def run(args) -> int:
 
     run_dirs = dirs if args.map_direction is None else np.append(dirs, args.map_direction)
     stacked = jax.vmap(lambda d: at(d)[0])(jnp.asarray(run_dirs, farm.dtype))
-    mounts = jax.vmap(lambda f: nacelle_mount(f, k_nac, backward=args.backward))(stacked) \
+    mounts = jax.vmap(lambda f: nacelle_mount(f, k_nac, backward=args.backward, north=True))(stacked) \
         if nacelle else ground
     u_refs = args.speed * np.stack([np.asarray(heading(d)) for d in run_dirs])
     sims_all = simulate_sectors(stacked, scan, mounts, hts, u_refs=u_refs, probe=probe,
@@ -242,12 +242,17 @@ def run(args) -> int:
     head = ["direction_deg", "disturbed"]
     for h in heights:
         head += [f"lidar_speed_{h:g}m", f"lidar_direction_{h:g}m", f"speed_ratio_{h:g}m",
-                 f"direction_addend_{h:g}m"]
+                 f"direction_addend_{h:g}m"] + ([f"yaw_misalignment_{h:g}m"] if nacelle else [])
+    # a nacelle lidar reports (north=True) true directions; its yaw misalignment is the
+    # reported direction minus the bearing its axis points to (rotor heading, +180 backward)
+    axis = (dirs - yaw[k_nac] + (180.0 if args.backward else 0.0)) if nacelle else None
     rows = [",".join(head)]
     for i, d in enumerate(dirs):
         row = [f"{d:g}", str(int(disturbed[i]))]
         for j in range(len(heights)):
             row += [fmt(speed[i, j]), fmt(ldir[i, j]), fmt(ratio[i, j]), fmt(addend[i, j])]
+            if nacelle:
+                row.append(fmt(float(np.mod(ldir[i, j] - axis[i] + 180.0, 360.0) - 180.0)))
         rows.append(",".join(row))
     meta = (f"# lidarjax farm: {kind} ({scan_name}), {args.model} wakes, {args.combination}, "
             f"free stream {args.speed:g} m/s at hub height, shear {args.shear:g}; speed_ratio = "
