@@ -4,6 +4,7 @@ import importlib.metadata
 
 from . import io as io
 from . import scenes as scenes
+from . import sectors as sectors
 from . import zephycube as zephycube
 from .angles import direction_difference as direction_difference
 from .angles import horizontal_speed as horizontal_speed
@@ -42,6 +43,9 @@ from .roses import CorrectionRose as CorrectionRose
 from .roses import correction_rose as correction_rose
 from .roses import sector_rose as sector_rose
 from .scan import Scan as Scan
+from .scan import nacelle_2beam as nacelle_2beam
+from .scan import nacelle_4beam as nacelle_4beam
+from .scan import nacelle_shear as nacelle_shear
 from .scan import reconstruct as reconstruct
 from .scan import windcube_v1 as windcube_v1
 from .scan import windcube_v2 as windcube_v2

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["plot_profiles", "plot_los_fit", "plot_roses", "plot_sensitivity", "sensitivity_map",
-           "plot_budget", "plot_sensitivity_profiles", "plot_series_ti"]
+           "plot_budget", "plot_sensitivity_profiles", "plot_series_ti", "plot_farm_map"]
 
 _COLOURS = {"point": "k", "windcube_v1": "C0", "windcube_v2": "C1", "zephir": "C2"}
 _LABELS = {"point": "point above the lidar", "windcube_v1": "Windcube V1",
@@ -95,11 +95,14 @@ def plot_los_fit(azimuths, los, fitted_velocity, cone_angle, path, *, title=None
     return _save(fig, path)
 
 
-def plot_roses(directions, speed_ratio, direction_addend, labels, path, *, title=None) -> Path:
+def plot_roses(directions, speed_ratio, direction_addend, labels, path, *, title=None,
+               shade=None, shade_label="disturbed sectors (IEC 61400-12-1 A)") -> Path:
     """Correction roses: speed ratio and direction addend against direction, polar axes.
 
     **Arguments:** `directions` ``(d,)`` meteorological degrees; `speed_ratio` and
-    `direction_addend` ``(d, h)`` (addend in degrees); `labels` one per column ``h``.
+    `direction_addend` ``(d, h)`` (addend in degrees); `labels` one per column ``h``;
+    `shade`: optional ``(start, end)`` direction intervals in degrees (e.g. merged disturbed
+    sectors from `lidarjax.sectors.merge_sectors`) shaded grey on both roses.
     """
     plt = _pyplot()
     fig = plt.figure(figsize=(11, 5))
@@ -115,6 +118,10 @@ def plot_roses(directions, speed_ratio, direction_addend, labels, path, *, title
         lo, hi = np.nanmin(d), np.nanmax(d)
         pad = 0.1 * (hi - lo) if hi > lo else 0.01
         ax.set_rlim(lo - pad, hi + pad)  # the radial axis spans the data, not from zero
+        for m, (a, b) in enumerate(shade or ()):
+            tt = np.radians(np.linspace(a, b, max(int(b - a), 2) + 1))
+            ax.fill_between(tt, lo - pad, hi + pad, color="0.6", alpha=0.35, lw=0,
+                            label=shade_label if m == 0 else None)
         ax.set_title(name, fontsize=10, pad=18)
     fig.axes[0].legend(loc="lower left", bbox_to_anchor=(-0.25, -0.15), fontsize=7)
     fig.suptitle(title or "correction roses against inflow direction", y=1.04)
@@ -270,3 +277,52 @@ def plot_series_ti(heights, lidar_ti, cup_ti, sonic_ti, path, *, label="lidar", 
     path = _save(fig, path)
     plt.close(fig)
     return path
+def plot_farm_map(farm, height, path, *, names=None, lidar=None, beams=None, extent=None,
+                  n=160, title=None) -> Path:
+    """A plan view of a `lidarjax.scenes.WindFarm`'s speed at `height` m above its datum, with
+    the rotors (lines across their axis), the lidar and its beams.
+
+    **Arguments:** `farm`; `height` (m); `names` of the turbines; `lidar` ``(x, y)`` and
+    `beams` ``(k, 2, 2)`` horizontal segments (start, end), local coordinates (m, relative to
+    ``farm.origin``); `extent` ``(xmin, xmax, ymin, ymax)`` (default: the turbines, the
+    lidar and the beams with a margin); `n` pixels per side.
+    """
+    plt = _pyplot()
+    tx, ty = np.asarray(farm.x, np.float64), np.asarray(farm.y, np.float64)
+    diam = np.asarray(farm.diameter, np.float64)
+    if extent is None:
+        xs = [tx, [lidar[0]] if lidar is not None else []]
+        ys = [ty, [lidar[1]] if lidar is not None else []]
+        if beams is not None:
+            b = np.asarray(beams, np.float64)
+            xs.append(b[..., 0].ravel())
+            ys.append(b[..., 1].ravel())
+        xx, yy = np.concatenate(xs), np.concatenate(ys)
+        m = 3.0 * float(diam.max())
+        extent = (xx.min() - m, xx.max() + m, yy.min() - m, yy.max() + m)
+    gx = np.linspace(extent[0], extent[1], n)
+    gy = np.linspace(extent[2], extent[3], n)
+    pts = np.stack([*np.meshgrid(gx, gy, indexing="xy"), np.full((n, n), float(height))], -1)
+    speed = np.asarray(jax.jit(lambda f, p: f.streamwise_local(p))(farm, jnp.asarray(pts, farm.dtype)))
+    fig, ax = plt.subplots(figsize=(8, 7))
+    im = ax.pcolormesh(gx, gy, speed, shading="auto", cmap="viridis")
+    fig.colorbar(im, ax=ax, label=f"speed at {float(height):g} m (m/s)")
+    heading = np.radians(np.asarray(farm.rotor_heading(), np.float64))
+    across = np.stack([np.cos(heading), -np.sin(heading)], -1)  # perpendicular to the axis
+    for k in range(tx.size):
+        seg = np.array([[tx[k], ty[k]]]) + np.outer([-0.5, 0.5], across[k]) * diam[k]
+        ax.plot(seg[:, 0], seg[:, 1], "w-", lw=2.5)
+        if names is not None:
+            ax.annotate(str(names[k]), (tx[k], ty[k]), color="w", fontsize=7,
+                        xytext=(3, 3), textcoords="offset points")
+    if beams is not None:
+        for s in np.asarray(beams, np.float64):
+            ax.plot(s[:, 0], s[:, 1], "r-", lw=0.8)
+    if lidar is not None:
+        ax.plot([lidar[0]], [lidar[1]], "r^", ms=8, label="lidar")
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_aspect("equal")
+    ax.set_xlabel("easting - origin (m)")
+    ax.set_ylabel("northing - origin (m)")
+    ax.set_title(title or f"wake field from {float(farm.direction):g} deg at {float(height):g} m")
+    return _save(fig, path)

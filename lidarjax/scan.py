@@ -57,9 +57,17 @@ from jaxtyping import Array, ArrayLike, Float
 from ._precision import default_float, is_concrete
 from .frames import beam_directions
 
-__all__ = ["Scan", "windcube_v1", "windcube_v2", "zephir", "reconstruct", "METHODS"]
+__all__ = ["Scan", "windcube_v1", "windcube_v2", "zephir", "reconstruct", "METHODS",
+           "nacelle_2beam", "nacelle_4beam", "nacelle_shear", "NACELLE_AZIMUTHS"]
 
-METHODS = ("windcube_v1", "windcube_v2", "sine_fit", "least_squares")
+METHODS = ("windcube_v1", "windcube_v2", "sine_fit", "least_squares", "nacelle_2beam",
+           "nacelle_4beam")
+
+#: Body-frame beam azimuths (degrees clockwise from body ``+y``) of the nacelle methods. With
+#: the forward-looking mount (``pitch = -90``: body ``z`` along the lidar's ``+y``, body ``+y``
+#: pointing down) azimuth 90 looks right and 270 left (2-beam, horizontal); 45/315 are the
+#: lower pair and 135/225 the upper pair (4-beam, a square seen from the nacelle).
+NACELLE_AZIMUTHS = {"nacelle_2beam": (90.0, 270.0), "nacelle_4beam": (45.0, 135.0, 225.0, 315.0)}
 
 #: Largest condition number of the beam matrix accepted at construction (a cone angle of
 #: 0.0081 degrees for DBS and the sine fit, 0.0091 for the Windcube V2); see the module docs.
@@ -152,7 +160,10 @@ class Scan(eqx.Module):
         tilted beams (DBS, sine fit) at cone angles ``c`` below 54.7 degrees,
         ``sqrt((4 cos^2 c + 1) / (2 sin^2 c))`` for the Windcube V2; it diverges as the cone
         angle goes to 0 (see the module docs)."""
-        s = jnp.linalg.svd(self.directions(), compute_uv=False)
+        n = self.directions()
+        if self.method in NACELLE_AZIMUTHS:  # they solve the two components in the beam plane
+            n = n[:, jnp.array([0, 2])]
+        s = jnp.linalg.svd(n, compute_uv=False)
         return s[0] / s[-1]
 
 
@@ -187,6 +198,22 @@ def _validate(az: np.ndarray, cone: np.ndarray, vertical: bool, method: str) -> 
             )
     if method == "sine_fit" and vertical:
         raise ValueError("Scan: method 'sine_fit' fits tilted beams only; use vertical=False.")
+    if method in NACELLE_AZIMUTHS:
+        want = np.array(NACELLE_AZIMUTHS[method])
+        if vertical or az.size != want.size or not np.allclose(np.mod(az, 360.0), want, atol=1e-6):
+            raise ValueError(
+                f"Scan: method {method!r} needs body azimuths {want.tolist()} degrees and no "
+                f"vertical beam, got {az.tolist()} (vertical={vertical}); use "
+                f"lidarjax.scan.{method}()."
+            )
+        cond = max(np.tan(np.radians(float(cone))), 1.0 / np.tan(np.radians(float(cone))))
+        if not cond <= MAX_CONDITION:
+            raise ValueError(
+                f"Scan: half-angle {float(cone):.3g} degrees of a nacelle lidar gives a "
+                f"condition number {cond:.3g} > MAX_CONDITION = {MAX_CONDITION:.0e}; real "
+                f"instruments use 10 to 30 degrees."
+            )
+        return
     if az.size + int(vertical) < 3:
         raise ValueError(
             f"Scan: {az.size + int(vertical)} beams cannot determine the three wind components; "
@@ -302,6 +329,9 @@ def reconstruct(scan: Scan, los: Float[Array, "... b"]) -> Float[Array, "... 3"]
     los = jnp.asarray(los)
     if los.shape[-1] != scan.n_beams:
         raise ValueError(f"reconstruct: los has {los.shape[-1]} beams, the scan {scan.n_beams}.")
+    if scan.method in NACELLE_AZIMUTHS:
+        x, _, z = _nacelle_pairs(scan, los)
+        return jnp.stack([x, jnp.zeros_like(x), z], axis=-1)
     if scan.method in ("windcube_v1", "windcube_v2"):
         u, v = _dbs_horizontal(scan, los)
         if scan.method == "windcube_v1":
@@ -312,3 +342,88 @@ def reconstruct(scan: Scan, los: Float[Array, "... b"]) -> Float[Array, "... 3"]
     # sine_fit and least_squares: the same linear least squares on the beam matrix.
     pinv = jnp.linalg.pinv(scan.directions().astype(los.dtype))  # (3, b)
     return jnp.einsum("kb,...b->...k", pinv, los)
+
+
+# ------------------------------------------------------------------------------------------
+# nacelle lidars (forward-looking, Mount(..., pitch=-90))
+# ------------------------------------------------------------------------------------------
+def nacelle_2beam(half_angle: float = 15.0, *, tilt_compensation: bool = True) -> Scan:
+    """A 2-beam forward-looking nacelle lidar (e.g. Avent Wind Iris): two horizontal beams
+    `half_angle` degrees either side of the rotor axis (body azimuths 90 and 270 about the
+    instrument axis). Mount it with `lidarjax.Mount(..., pitch=-90)` (or
+    `lidarjax.scenes.farm.nacelle_mount`): ``heights`` are then distances along the axis and
+    each beam focuses at ``distance / cos(half_angle)``.
+
+    Reconstruction (``"nacelle_2beam"``; Kragh et al. 2013, Borraccino et al. 2017) for a
+    horizontally homogeneous wind without vertical component: with ``l_r``, ``l_l`` the
+    right and left LOS (m/s, positive away),
+
+    ``V_axis = (l_r + l_l) / (2 cos c)``, ``V_cross = (l_r - l_l) / (2 sin c)``,
+
+    the body vector ``(V_cross, 0, V_axis)``; with tilt compensation (default: a nacelle
+    lidar knows its mounting) it is reported level, so the horizontal speed of the reported
+    vector is the hub-height (rotor-effective) wind speed and its direction, relative to the
+    lidar's ``+y`` (the rotor axis, for ``epsilon = 0``), is the yaw misalignment
+    (`lidarjax.wrap180` of it; the wind direction minus the nacelle heading)."""
+    return Scan(list(NACELLE_AZIMUTHS["nacelle_2beam"]), half_angle, method="nacelle_2beam",
+                tilt_compensation=tilt_compensation)
+
+
+def nacelle_4beam(half_angle: float = 15.0, *, tilt_compensation: bool = True) -> Scan:
+    """A 4-beam forward-looking nacelle lidar: beams on a square around the rotor axis,
+    `half_angle` degrees off it (body azimuths 45, 135, 225, 315: with ``pitch = -90`` a
+    lower pair 45/315 and an upper pair 135/225, each pair left and right).
+
+    Reconstruction (``"nacelle_4beam"``; Borraccino et al. 2017): each pair is a 2-beam lidar
+    at its own height (`nacelle_2beam`'s formulas with the pair's horizontal half-angle,
+    ``sin c sin 45`` across), assuming no vertical wind; the reported vector is the mean of
+    the two pairs' (the rotor-effective hub-height wind and yaw misalignment). The vertical
+    shear comes from the pairs' speeds: `nacelle_shear`."""
+    return Scan(list(NACELLE_AZIMUTHS["nacelle_4beam"]), half_angle, method="nacelle_4beam",
+                tilt_compensation=tilt_compensation)
+
+
+def _nacelle_pairs(scan: Scan, los):
+    """Body-frame ``(V_cross, pairs, V_axis)`` of the nacelle methods: 2-beam gives one pair;
+    4-beam the mean of the lower (45/315) and upper (135/225) pairs, and `pairs` carries the
+    per-pair ``(cross, axis)`` as ``(..., 2, 2)`` (lower, upper)."""
+    c = jnp.deg2rad(scan.cone_angle)
+    if scan.method == "nacelle_2beam":
+        x = (los[..., 0] - los[..., 1]) / (2.0 * jnp.sin(c))
+        z = (los[..., 0] + los[..., 1]) / (2.0 * jnp.cos(c))
+        return x, None, z
+    s = 2.0 * jnp.sin(c) * jnp.sin(jnp.deg2rad(jnp.asarray(45.0, los.dtype)))
+    two_cos = 2.0 * jnp.cos(c)
+    lower = ((los[..., 0] - los[..., 3]) / s, (los[..., 0] + los[..., 3]) / two_cos)
+    upper = ((los[..., 1] - los[..., 2]) / s, (los[..., 1] + los[..., 2]) / two_cos)
+    pairs = jnp.stack([jnp.stack(lower, -1), jnp.stack(upper, -1)], -2)
+    x = 0.5 * (lower[0] + upper[0])
+    z = 0.5 * (lower[1] + upper[1])
+    return x, pairs, z
+
+
+def nacelle_shear(
+    scan: Scan, los: Float[Array, "... 4"], distance: Float[ArrayLike, ...],
+    hub_height: Float[ArrayLike, ...],
+) -> tuple[Float[Array, ...], Float[Array, ...], Float[Array, ...]]:
+    """Power-law shear from a 4-beam nacelle lidar (forward-looking, ``pitch = -90``).
+
+    **Arguments:** `scan` (`nacelle_4beam`), `los` ``(..., 4)`` LOS (m/s) at axial `distance`
+    (m, the simulate ``heights``), `hub_height` (m above the ground: the lidar's height).
+
+    Each pair's horizontal speed ``U = sqrt(V_cross^2 + V_axis^2)`` is taken at its height
+    ``H -+ dz``, ``dz = (distance / cos c) sin c cos 45``; the exponent is
+    ``alpha = ln(U_upper / U_lower) / ln((H + dz) / (H - dz))``.
+
+    **Returns:** ``(alpha, U_lower, U_upper)``.
+    """
+    if scan.method != "nacelle_4beam":
+        raise ValueError(f"nacelle_shear: needs a nacelle_4beam scan, got method {scan.method!r}.")
+    los = jnp.asarray(los)
+    _, pairs, _ = _nacelle_pairs(scan, los)
+    speed = jnp.sqrt(jnp.sum(pairs * pairs, -1))  # (..., 2): lower, upper
+    c = jnp.deg2rad(scan.cone_angle)
+    dz = jnp.asarray(distance) / jnp.cos(c) * jnp.sin(c) * jnp.sqrt(jnp.asarray(0.5, los.dtype))
+    h = jnp.asarray(hub_height)
+    alpha = jnp.log(speed[..., 1] / speed[..., 0]) / jnp.log((h + dz) / (h - dz))
+    return alpha, speed[..., 0], speed[..., 1]

@@ -10,12 +10,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import correct, demo, probes, series, simulate, table
+from . import correct, demo, farm, probes, series, simulate, table
 from . import sensitivity as sensitivity_cmd
 from ._common import enable_x64
 
 #: The command modules, in the order `--help` lists them.
-COMMANDS = (demo, simulate, table, correct, probes, sensitivity_cmd, series)
+COMMANDS = (demo, simulate, table, correct, probes, sensitivity_cmd, series, farm)
 
 
 def build_parser() -> argparse.ArgumentParser:

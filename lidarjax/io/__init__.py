@@ -9,6 +9,9 @@
   `lidarjax.GridField`.
 - `openfoam`: OpenFOAM case directories (mesh + `U`, ASCII/binary/gzip) and OpenFOAM's own
   cellPoint interpolation at arbitrary points (`sample_openfoam`).
+- `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII) for `lidarjax.GridField`.
+- `layout`: wind-farm layouts (seed 004's `<name> <easting> <northing>`), turbine types,
+  probe-point CSVs.
 
 Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/write),
 `progress` (tqdm progress bars). Each raises an `ImportError` naming the extra when used
@@ -23,6 +26,11 @@ from .fields import read_fluent_points as read_fluent_points
 from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
+from .layout import FarmLayout as FarmLayout
+from .layout import read_farm as read_farm
+from .layout import read_layout as read_layout
+from .layout import read_turbine_type as read_turbine_type
+from .layout import write_probe_points as write_probe_points
 from .motion import read_motion_csv as read_motion_csv
 from .openfoam import OpenFOAMField as OpenFOAMField
 from .openfoam import is_openfoam_case as is_openfoam_case

@@ -5,6 +5,8 @@
 - `lidarjax.scenes.turbulence`: `FrozenTurbulence`, any mean field plus a `TurbulenceBox`
   advected with the wind (Taylor), time-dependent through ``sample_local_at``; `mann_box`
   generates boxes with hipersim (extra ``turbulence``).
+- `lidarjax.scenes.farm`: wind-farm wakes (`WindFarm`: top-hat Jensen or Gaussian wakes,
+  yaw deflection, turbine interaction), non-linear in direction.
 
 Every scene is an `AbstractField` (CFD frame: ``+x`` east, ``+y`` north, ``+z`` up, metres
 and m/s; directions meteorological), dynamic and differentiable in all its parameters.
@@ -21,6 +23,11 @@ from .analytic import hill as hill
 from .analytic import linear as linear
 from .analytic import power_law as power_law
 from .analytic import uniform as uniform
+from .farm import FarmState as FarmState
+from .farm import WindFarm as WindFarm
+from .farm import nacelle_mount as nacelle_mount
+from .farm import overlap_area as overlap_area
+from .farm import wind_farm as wind_farm
 from .turbulence import FrozenTurbulence as FrozenTurbulence
 from .turbulence import TurbulenceBox as TurbulenceBox
 from .turbulence import frozen_turbulence as frozen_turbulence
