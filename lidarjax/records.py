@@ -1,0 +1,776 @@
+"""Correcting real lidar records with a response table, end to end (files in, files out).
+
+`load_records` reads a Windcube ``.sta``/``.stdsta`` (10-minute statistics), ``.rtd``
+(real-time line of sight, averaged to 10-minute beam means) or ZephIR ``.csv`` file into one
+`RecordSet`; `check_instrument` compares the table's metadata with the record's header;
+`correct_records` inverts every record and height with the table (streamed in chunks of one
+compiled shape), and `write_corrected_csv` / `write_corrected_netcdf` write the result.
+
+## Flags
+
+`CorrectedRecords.flags` holds the `lidarjax.InverseFlag` bits of the inversion (bits 0-4)
+OR-ed with the `RecordFlag` bits of the record itself (bits 8 and up): a record that the
+file could not give (a corrupt row, a value out of its physical range, too little data) is
+NaN with its reason, never dropped and never reinterpreted (a negative reported speed is not
+turned into a positive one from the opposite direction).
+
+## Uncertainty of reported (``.sta``, ZephIR) records
+
+A reported 10-minute record is the mean of the instrument's per-scan reconstructions. When
+no `noise` is given, its noise level is the standard error of that mean, from the record's
+own dispersion and availability (`reported_noise`):
+
+    sigma_component = sqrt((sigma_u**2 + sigma_v**2) / 2)
+    n_eff           = availability * period / scan_period
+    noise           = sigma_component / sqrt(n_eff)
+
+with ``sigma_u`` the speed dispersion (m/s, the file's ``Wind Speed Dispersion``; ZephIR:
+``TI * speed`` when exported), ``sigma_v = speed * direction dispersion (rad)`` when the file
+has one, else ``0.8 * sigma_u`` (the IEC 61400-1 ratio of lateral to longitudinal turbulence),
+``availability`` in [0, 1] (1 when the file has no such column), ``period`` the record
+interval and ``scan_period`` the time of one full scan (`SCAN_PERIOD_S`; ZephIR's
+``Packets in Average``, when exported, is used as ``n_eff`` directly). The noise of each
+reported horizontal component is passed to `lidarjax.invert_reconstructed`, which propagates
+it through the table's response to the free-stream speed and direction. The model treats the
+scans of an interval as independent samples (it is the instrument's sampling noise, not the
+turbulent sampling error of a 10-minute mean, which a mast beside it shares); it ignores the
+bias of a scalar-averaged speed (``sigma_v**2 / 2U``, below 1 % above 5 m/s). Coverage on
+synthetic records with known noise: tests/test_records_uncertainty.py.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["RecordFlag", "RecordSet", "CorrectedRecords", "load_records", "check_instrument",
+           "match_heights", "reported_noise", "correct_records", "write_corrected_csv",
+           "write_corrected_netcdf", "quality_summary", "SCAN_PERIOD_S",
+           "DEFAULT_MIN_AVAILABILITY"]
+
+
+class RecordFlag(enum.IntFlag):
+    """Why a record is NaN before any inversion (bits 8 and up, beside `InverseFlag`)."""
+
+    OK = 0
+    #: The file's row could not be read (cut short, bad time stamp, non-numeric cell).
+    CORRUPT_ROW = 256
+    #: The record's data availability is below the minimum (`--min-availability`).
+    LOW_AVAILABILITY = 512
+    #: A value outside its physical range: negative speed, direction outside [0, 360],
+    #: CNR above 0 dB. The record is NaN; the value is never reinterpreted.
+    IMPOSSIBLE_VALUE = 1024
+    #: The interval is only partly covered by the file (first or last of a raw file).
+    PARTIAL_INTERVAL = 2048
+    #: The record has no value at this height (NaN in the file).
+    MISSING = 4096
+
+
+#: Seconds per full scan, by instrument kind, for the standard error of reported records:
+#: Windcube V2/V2.1 (4 tilted beams + vertical, about 1 s each), Windcube V1 (4 beams at about
+#: 1.5 s), ZephIR 300/ZX (one 1-s rotation per height, heights cycled, about 3 heights per
+#: cycle on average).
+SCAN_PERIOD_S = {"windcube_v2": 5.0, "windcube_v1": 6.0, "zephir": 3.0}
+
+#: Records whose data availability is below this (percent) are flagged LOW_AVAILABILITY.
+DEFAULT_MIN_AVAILABILITY = 50.0
+
+#: Heights closer than this (m) are the same height.
+HEIGHT_TOLERANCE_M = 0.5
+
+
+# ------------------------------------------------------------------------------------------
+# reading
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class RecordSet:
+    """A record file, normalised for correction. Arrays ``(r, k)`` unless noted.
+
+    - `kind`: 'sta', 'rtd' or 'zephir'; `path`; `instrument`: 'windcube_v1',
+      'windcube_v2', 'zephir' or '' when the file does not say.
+    - `time`: ``(r,)`` datetime64[s], end of interval (UTC when the reader knows the zone).
+    - `heights`: ``(k,)`` m above the instrument.
+    - reported records: `speed` (m/s), `direction` (meteorological degrees), `speed_std`
+      (m/s), `direction_std` (deg), `availability` (percent), `n_samples` (ZephIR packets);
+    - raw records: `los` ``(r, k, b)`` m/s positive away from the lidar, beams
+      [0, 90, 180, 270, V]; `availability` (percent, the worst beam's);
+    - `flags`: ``(r, k)`` `RecordFlag` bits; `warnings`: lines about skipped rows;
+    - `scan_angle`, `direction_offset`, `pitch`, `roll`, `cnr_threshold`: header facts in
+      degrees / dB, NaN when the file does not say; `period_s`: interval in seconds.
+    """
+
+    kind: str
+    path: str
+    instrument: str
+    time: np.ndarray
+    heights: np.ndarray
+    flags: np.ndarray
+    speed: np.ndarray | None = None
+    direction: np.ndarray | None = None
+    speed_std: np.ndarray | None = None
+    direction_std: np.ndarray | None = None
+    availability: np.ndarray | None = None
+    n_samples: np.ndarray | None = None
+    los: np.ndarray | None = None
+    scan_angle: float = math.nan
+    direction_offset: float = math.nan
+    pitch: float = math.nan
+    roll: float = math.nan
+    cnr_threshold: float = math.nan
+    period_s: float = 600.0
+    warnings: tuple[str, ...] = ()
+
+
+def _attr(rec, *names, default=math.nan):
+    for n in names:
+        v = getattr(rec, n, None)
+        if v is not None:
+            return v
+    return default
+
+
+def _float_attr(rec, *names) -> float:
+    v = _attr(rec, *names)
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _row_flags(rec, shape) -> np.ndarray:
+    """The reader's per-row or per-record flags, as `RecordFlag` bits ``(r, k)``."""
+    flags = np.zeros(shape, np.int64)
+    bad = _attr(rec, "corrupt", "bad_rows", "row_corrupt", default=None)
+    if bad is not None:
+        b = np.asarray(bad, bool)
+        flags |= np.where(b.reshape(b.shape + (1,) * (2 - b.ndim)), int(RecordFlag.CORRUPT_ROW), 0)
+    partial = _attr(rec, "partial", "partial_interval", default=None)
+    if partial is not None:
+        p = np.asarray(partial, bool)
+        flags |= np.where(p.reshape(p.shape + (1,) * (2 - p.ndim)),
+                          int(RecordFlag.PARTIAL_INTERVAL), 0)
+    return flags
+
+
+def _extra(rec, *keys):
+    extra = getattr(rec, "extra", None) or {}
+    for k in keys:
+        if k in extra:
+            return np.asarray(extra[k], np.float64)
+    return None
+
+
+def _instrument_of(rec, kind: str) -> str:
+    text = str(_attr(rec, "instrument", "instrument_kind", default="") or "").lower()
+    for key in ("windcube_v1", "windcube_v2", "zephir"):
+        if key in text.replace(" ", "_").replace("-", "_"):
+            return key
+    if "zephir" in text or "zx" in text:
+        return "zephir"
+    if kind == "zephir":
+        return "zephir"
+    version = str(getattr(rec, "version", "") or "").upper()
+    if text.startswith("v1") or version == "V1":
+        return "windcube_v1"
+    if version.startswith("V2") or text.startswith("v2"):
+        return "windcube_v2"
+    return ""
+
+
+def load_records(path, *, cnr_threshold: float | None = None, period: str = "10min",
+                 min_availability: float = DEFAULT_MIN_AVAILABILITY) -> RecordSet:
+    """Read a record file (by suffix: ``.sta``/``.stdsta``, ``.rtd``/``.stdrtd``, ``.csv``).
+
+    `cnr_threshold` (dB) overrides the ``.rtd`` header's; `period` is the averaging interval
+    of raw records; records below `min_availability` percent are flagged LOW_AVAILABILITY.
+    Physically impossible values are flagged IMPOSSIBLE_VALUE and set to NaN. Raises
+    `ValueError` naming the file for an unknown format or an unreadable file.
+    """
+    from .io import group_rtd, read_rtd, read_sta, read_zephir_csv
+
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix in (".sta", ".stdsta", ".csv"):
+        kind = "zephir" if suffix == ".csv" else "sta"
+        rec = (read_zephir_csv if kind == "zephir" else read_sta)(p)
+        speed = np.array(rec.speed, np.float64)
+        direction = np.array(rec.direction, np.float64)
+        shape = speed.shape
+        flags = _row_flags(rec, shape)
+        speed_std = getattr(rec, "speed_std", None)
+        speed_std = None if speed_std is None else np.array(speed_std, np.float64)
+        availability = getattr(rec, "availability", None)
+        availability = None if availability is None else np.array(availability, np.float64)
+        n_samples = None
+        direction_std = _extra(rec, "winddirectiondispersion", "winddirectionstd",
+                               "directiondispersion", "directionstd")
+        if kind == "zephir":
+            ti = _extra(rec, "ti", "turbulenceintensity", "horizontalti")
+            std = _extra(rec, "horizontalwindspeedstd", "windspeedstd", "horizontalwindspeedsd")
+            if std is not None:
+                speed_std = std
+            elif ti is not None:
+                speed_std = ti * (100.0 if np.nanmax(np.abs(ti), initial=0) <= 1.0 else 1.0) \
+                    * speed / 100.0
+            n_samples = _extra(rec, "packetsinaverage", "packets", "validpackets")
+            if availability is None:
+                availability = _extra(rec, "dataavailability", "availability")
+        bad = (speed < 0) | (direction < 0) | (direction > 360)
+        cnr = getattr(rec, "cnr", None)
+        if cnr is not None:
+            bad |= np.asarray(cnr, np.float64) > 0
+        flags |= np.where(bad, int(RecordFlag.IMPOSSIBLE_VALUE), 0)
+        if availability is not None:
+            low = availability < min_availability
+            flags |= np.where(low, int(RecordFlag.LOW_AVAILABILITY), 0)
+        unusable = flags != 0
+        speed[unusable] = np.nan
+        direction[unusable] = np.nan
+        missing = ~unusable & ~(np.isfinite(speed) & (np.isfinite(direction) | (speed == 0)))
+        flags |= np.where(missing, int(RecordFlag.MISSING), 0)
+        return RecordSet(
+            kind=kind, path=str(p), instrument=_instrument_of(rec, kind),
+            time=np.asarray(rec.time, "datetime64[s]"), heights=np.asarray(rec.heights, float),
+            flags=flags, speed=speed, direction=direction, speed_std=speed_std,
+            direction_std=direction_std, availability=availability, n_samples=n_samples,
+            scan_angle=_float_attr(rec, "scan_angle"),
+            direction_offset=_float_attr(rec, "direction_offset"),
+            pitch=_float_attr(rec, "pitch", "pitch_angle"),
+            roll=_float_attr(rec, "roll", "roll_angle"),
+            period_s=_period_seconds(rec, np.asarray(rec.time, "datetime64[s]")),
+            warnings=tuple(getattr(rec, "warnings", ()) or ()),
+        )
+    if suffix in (".rtd", ".stdrtd"):
+        rec = read_rtd(p)
+        kwargs = {}
+        if cnr_threshold is not None:
+            kwargs["min_cnr"] = float(cnr_threshold)
+        beams = group_rtd(rec, period, **kwargs)
+        los = np.array(beams.los, np.float64)
+        shape = los.shape[:2]
+        flags = _row_flags(beams, shape)
+        avail = getattr(beams, "availability", None)
+        if avail is not None:
+            a = np.asarray(avail, np.float64)
+            if a.ndim == 3:
+                a = np.nanmin(a[..., :4], axis=-1)  # the worst tilted beam
+            a = a * (100.0 if np.nanmax(a, initial=0.0) <= 1.0 else 1.0)
+            flags |= np.where(a < min_availability, int(RecordFlag.LOW_AVAILABILITY), 0)
+        else:
+            a = None
+        los[flags != 0] = np.nan
+        missing = (flags == 0) & (np.isfinite(los).sum(-1) < 3)
+        flags |= np.where(missing, int(RecordFlag.MISSING), 0)
+        threshold = cnr_threshold if cnr_threshold is not None else _float_attr(
+            rec, "cnr_threshold")
+        return RecordSet(
+            kind="rtd", path=str(p), instrument=_instrument_of(rec, "rtd"),
+            time=np.asarray(beams.time, "datetime64[s]"), heights=np.asarray(beams.heights, float),
+            flags=flags, los=los, availability=a,
+            scan_angle=_float_attr(rec, "scan_angle"),
+            direction_offset=_float_attr(rec, "direction_offset"),
+            pitch=_float_attr(rec, "pitch", "pitch_angle"),
+            roll=_float_attr(rec, "roll", "roll_angle"),
+            cnr_threshold=float(threshold),
+            period_s=float(beams.period / np.timedelta64(1, "s")),
+            warnings=tuple(getattr(rec, "warnings", ()) or ()),
+        )
+    raise ValueError(f"{p}: unknown record format {suffix!r}; expected .sta, .stdsta, .rtd or a "
+                     "ZephIR .csv")
+
+
+def _period_seconds(rec, time) -> float:
+    period = getattr(rec, "period", None)
+    if period is not None:
+        try:
+            return float(np.timedelta64(period) / np.timedelta64(1, "s"))
+        except (TypeError, ValueError):
+            pass
+    if time.size > 1:
+        steps = np.diff(time).astype("timedelta64[s]").astype(np.int64)
+        steps = steps[steps > 0]
+        if steps.size:
+            return float(np.median(steps))
+    return 600.0
+
+
+# ------------------------------------------------------------------------------------------
+# consistency
+
+
+def _wrap(a: float) -> float:
+    return (a + 180.0) % 360.0 - 180.0
+
+
+def check_instrument(metadata: dict, table, records: RecordSet, *,
+                     angle_tolerance: float = 1.0) -> list[str]:
+    """Mismatches between a table's metadata and a record file's header, one text each
+    ("scan angle: table 28 deg, record header ScanAngle=15 deg"). Facts either side does not
+    state are skipped (see `table_warnings` for tables without metadata)."""
+    out = []
+    scan = str(metadata.get("scan", "") or "")
+    inst = records.instrument
+    if scan and inst and scan != inst:
+        out.append(f"instrument: table built for {scan}, record file is from a {inst}")
+    if scan and not inst:
+        family = "zephir" if records.kind == "zephir" else "windcube"
+        if not scan.startswith(family):
+            out.append(f"instrument: table built for {scan}, record file is a {family} "
+                       f"{records.kind} file")
+    cone = metadata.get("cone_angle_deg")
+    if isinstance(cone, (int, float)) and math.isfinite(records.scan_angle):
+        if abs(float(cone) - records.scan_angle) > angle_tolerance:
+            out.append(f"cone angle: table {cone:g} deg, record header ScanAngle="
+                       f"{records.scan_angle:g} deg")
+    if records.kind == "rtd":
+        n_beams = metadata.get("n_beams", getattr(table, "n_beams", None))
+        if isinstance(n_beams, int) and n_beams not in (4, 5):
+            out.append(f"beam layout: table has {n_beams} beams, the .rtd file has 4 tilted "
+                       "beams (0/90/180/270) and a vertical one")
+    eps = metadata.get("epsilon_deg")
+    if isinstance(eps, (int, float)) and math.isfinite(records.direction_offset):
+        if abs(_wrap(float(eps) - records.direction_offset)) > angle_tolerance:
+            out.append(f"direction offset: table epsilon {float(eps):g} deg (beam 0 points "
+                       f"there, clockwise from north), record header DirectionOffset="
+                       f"{records.direction_offset:g} deg")
+    for name, key in (("pitch", "pitch_deg"), ("roll", "roll_deg")):
+        tv, rv = metadata.get(key), getattr(records, name)
+        if isinstance(tv, (int, float)) and math.isfinite(rv) and abs(float(tv) - rv) > \
+                angle_tolerance:
+            out.append(f"{name}: table {float(tv):g} deg, record header {rv:g} deg")
+    return out
+
+
+def table_warnings(metadata: dict) -> list[str]:
+    """What an old table (without instrument metadata) cannot check."""
+    missing = [k for k in ("scan", "cone_angle_deg", "epsilon_deg", "heights_m")
+               if k not in metadata]
+    if missing:
+        return [f"the table has no {', '.join(missing)} metadata, so the instrument cannot be "
+                "checked against the record header; rebuild it with this lidarjax table"]
+    return []
+
+
+def match_heights(table_heights, record_heights, *, tolerance: float = HEIGHT_TOLERANCE_M):
+    """Pair table and record heights within `tolerance` metres.
+
+    **Returns:** ``(table_index, record_index, record_only, table_only)``: index arrays of the
+    common heights (ascending), and the record heights the table lacks and the table heights
+    the record lacks (metres).
+    """
+    th = np.asarray(table_heights, np.float64).reshape(-1)
+    rh = np.asarray(record_heights, np.float64).reshape(-1)
+    ti, ri = [], []
+    for i, h in enumerate(th):
+        if rh.size == 0:
+            break
+        j = int(np.argmin(np.abs(rh - h)))
+        if abs(rh[j] - h) <= tolerance and j not in ri:
+            ti.append(i)
+            ri.append(j)
+    record_only = [float(h) for j, h in enumerate(rh) if j not in ri]
+    table_only = [float(h) for i, h in enumerate(th) if i not in ti]
+    return np.asarray(ti, int), np.asarray(ri, int), record_only, table_only
+
+
+def subset_table(table, index):
+    """The table restricted to the heights `index` (splines refitted; cheap)."""
+    from .response import ResponseTable
+
+    idx = np.asarray(index, int)
+    if idx.size == table.n_heights and np.all(idx == np.arange(table.n_heights)):
+        return table
+
+    def take(a, axis=1):
+        return None if a is None else np.take(np.asarray(a), idx, axis=axis)
+
+    return ResponseTable(
+        np.asarray(table.directions), take(table.response),
+        reconstructed=take(table.reconstructed), point=take(table.point),
+        beam_velocity=take(table.beam_velocity),
+        beam_vectors=None if table.beam_vectors is None else np.asarray(table.beam_vectors),
+        heights=take(table.heights, axis=0))
+
+
+# ------------------------------------------------------------------------------------------
+# uncertainty
+
+
+def reported_noise(speed, speed_std, *, availability=None, direction_std=None, n_samples=None,
+                   period_s: float = 600.0, scan_period_s: float = 5.0) -> np.ndarray:
+    """Noise (m/s) of each reported horizontal component of 10-minute records: the standard
+    error of the interval mean (model in the module docstring). Arrays broadcast together;
+    `availability` in percent; `direction_std` in degrees. NaN where the dispersion is
+    unknown or not positive."""
+    speed = np.asarray(speed, np.float64)
+    su = np.asarray(speed_std, np.float64)
+    if direction_std is not None:
+        sv = np.abs(speed) * np.deg2rad(np.asarray(direction_std, np.float64))
+        sv = np.where(np.isfinite(sv), sv, 0.8 * su)
+    else:
+        sv = 0.8 * su
+    sigma = np.sqrt(0.5 * (su * su + sv * sv))
+    if n_samples is not None:
+        n_eff = np.asarray(n_samples, np.float64)
+    else:
+        a = 1.0 if availability is None else np.asarray(availability, np.float64) / 100.0
+        a = np.where(np.isfinite(a), np.clip(a, 0.0, 1.0), 1.0)
+        n_eff = a * float(period_s) / float(scan_period_s)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        noise = sigma / np.sqrt(np.maximum(n_eff, 1.0))
+    return np.where((sigma > 0) & np.isfinite(sigma) & (n_eff > 0), noise, np.nan)
+
+
+# ------------------------------------------------------------------------------------------
+# correcting
+
+
+@dataclasses.dataclass(frozen=True)
+class CorrectedRecords:
+    """Corrected records (`correct_records`); arrays ``(r, h)`` unless noted.
+
+    - `kind`: 'sta', 'rtd' or 'zephir'; `time` ``(r,)`` datetime64 (end of interval);
+      `heights` ``(h,)`` m above the lidar (those both the table and the record have);
+    - `speed`, `direction`: free-stream horizontal speed (m/s) and meteorological direction
+      (degrees), NaN where not converged; `speed_std`, `direction_std`: one-sigma;
+    - `converged`, `flags` (`lidarjax.InverseFlag` bits | `RecordFlag` bits);
+    - `measured_speed`, `measured_direction`: what the instrument reported (for raw LOS
+      records, the homogeneous-flow reconstruction);
+    - `noise`: the noise level used (m/s; given, from the record's dispersion, or estimated
+      from spare beams); `availability`: percent, NaN when the file has none;
+    - `record_only_heights`, `table_only_heights`: heights (m) not corrected because the
+      other side lacks them; `warnings`: lines the reader reported.
+    """
+
+    kind: str
+    time: np.ndarray
+    heights: np.ndarray
+    speed: np.ndarray
+    direction: np.ndarray
+    speed_std: np.ndarray
+    direction_std: np.ndarray
+    converged: np.ndarray
+    flags: np.ndarray
+    measured_speed: np.ndarray
+    measured_direction: np.ndarray
+    noise: np.ndarray | None = None
+    availability: np.ndarray | None = None
+    record_only_heights: tuple[float, ...] = ()
+    table_only_heights: tuple[float, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+def _progress(label: str, enabled: bool):
+    """A callback ``(done, total)`` drawing a one-line progress bar on stderr."""
+    if not enabled:
+        return lambda done, total: None
+    state = {"last": -1}
+
+    def show(done, total):
+        pct = 100 if total == 0 else int(100 * done / total)
+        if pct != state["last"]:
+            state["last"] = pct
+            end = "\n" if done >= total else ""
+            print(f"\r{label}: {pct:3d} % ({done}/{total})", end=end, file=sys.stderr,
+                  flush=True)
+
+    return show
+
+
+def correct_records(
+    table,
+    path,
+    *,
+    noise: float | None = None,
+    chunk_records: int = 8192,
+    progress: bool = False,
+    records: RecordSet | None = None,
+    scan_period_s: float | None = None,
+    cnr_threshold: float | None = None,
+    min_availability: float = DEFAULT_MIN_AVAILABILITY,
+) -> CorrectedRecords:
+    """Read a record file and invert every record and height with `table`.
+
+    - ``.sta`` / ``.stdsta`` (Windcube statistics) and ZephIR ``.csv``:
+      `lidarjax.invert_reconstructed` on the reported speed and direction. `noise` is the
+      noise of each reported component (m/s); without it, the record's own dispersion and
+      availability give it (`reported_noise`, model in the module docstring);
+    - ``.rtd`` (Windcube real-time LOS): 10-minute beam means after the CNR filter (the
+      header's `CNRThreshold`, or `cnr_threshold`), then `lidarjax.invert` on the raw LOS
+      (noise estimated from the spare beams unless `noise` is given).
+
+    Only heights both the table and the record have (within 0.5 m) are corrected; the others
+    are listed in `record_only_heights` / `table_only_heights`. Records are processed in
+    chunks of `chunk_records` (one compiled shape; the last chunk is padded), with a progress
+    line when asked. Bad records come back NaN with a reason in `flags`, never an exception.
+    Pass an already loaded `records` to skip reading `path`.
+    """
+    from .angles import horizontal_speed, wind_direction
+    from .inverse import invert, invert_reconstructed
+
+    rec = records if records is not None else load_records(
+        path, cnr_threshold=cnr_threshold, min_availability=min_availability)
+    if noise is not None and not (math.isfinite(float(noise)) and float(noise) > 0):
+        raise ValueError(f"noise must be a finite positive number (m/s), got {noise}")
+    if table.heights is None:
+        raise ValueError("the response table has no heights; rebuild it with lidarjax table")
+    ti, ri, record_only, table_only = match_heights(table.heights, rec.heights)
+    if ti.size == 0:
+        raise ValueError(
+            f"{rec.path}: none of the table's heights "
+            f"({', '.join(f'{h:g}' for h in np.asarray(table.heights))} m) is among the "
+            f"record's ({', '.join(f'{h:g}' for h in rec.heights)} m); build the table at the "
+            "record's heights (lidarjax table --heights-from RECORDS)")
+    sub = subset_table(table, ti)
+    n, h = rec.time.size, ti.size
+    dtype = np.asarray(table.response).dtype
+    flags_rec = rec.flags[:, ri]
+    if rec.kind == "rtd":
+        if sub.n_beams > rec.los.shape[-1]:
+            raise ValueError(f"{rec.path}: the table has {sub.n_beams} beams, the record "
+                             f"{rec.los.shape[-1]}")
+        los = rec.los[:, ri, : sub.n_beams]
+        data = (los,)
+        vectors = np.asarray(sub.beam_vectors) if sub.beam_vectors is not None else None
+        if vectors is not None:
+            homog = np.einsum("kb,rhb->rhk", np.linalg.pinv(vectors), np.nan_to_num(los))
+            homog[np.isnan(los).any(-1)] = np.nan
+        else:
+            homog = np.full(los.shape[:-1] + (3,), np.nan)
+        measured = (np.asarray(horizontal_speed(homog)), np.asarray(wind_direction(homog)))
+        noise_arr = None if noise is None else np.full((n, h), float(noise))
+    else:
+        speed, direction = rec.speed[:, ri], rec.direction[:, ri]
+        data = (speed, direction)
+        measured = (speed, direction)
+        if noise is not None:
+            noise_arr = np.full((n, h), float(noise))
+        elif rec.speed_std is not None:
+            period = rec.period_s if rec.period_s > 0 else 600.0
+            sp = scan_period_s or SCAN_PERIOD_S.get(rec.instrument or (
+                "zephir" if rec.kind == "zephir" else "windcube_v2"), 5.0)
+
+            def pick(a):
+                return None if a is None else np.asarray(a)[:, ri]
+
+            noise_arr = reported_noise(speed, pick(rec.speed_std),
+                                       availability=pick(rec.availability),
+                                       direction_std=pick(rec.direction_std),
+                                       n_samples=pick(rec.n_samples), period_s=period,
+                                       scan_period_s=sp)
+        else:
+            noise_arr = None
+    out = {k: np.empty((n, h), np.float64) for k in ("speed", "direction", "speed_std",
+                                                      "direction_std", "noise")}
+    out["converged"] = np.zeros((n, h), bool)
+    out["flags"] = np.zeros((n, h), np.int64)
+    size = max(1, min(chunk_records, n))
+    show = _progress(f"correcting {Path(rec.path).name}", progress)
+    show(0, n)
+    for s in range(0, n, size):
+        part = [np.asarray(a[s:s + size], dtype) for a in data]
+        m = part[0].shape[0]
+        npart = None if noise_arr is None else np.asarray(noise_arr[s:s + size], dtype)
+        if m < size:  # pad to the compiled shape with NaN records
+            part = [np.concatenate([a, np.full((size - m,) + a.shape[1:], np.nan, dtype)])
+                    for a in part]
+            if npart is not None:
+                npart = np.concatenate([npart, np.full((size - m, h), np.nan, dtype)])
+        if npart is not None:
+            # records without a usable noise level get a placeholder (their std is NaN below)
+            no_noise = ~(npart > 0)
+            npart = np.where(no_noise, 1.0, npart)
+        if rec.kind == "rtd":
+            inv = invert(sub, part[0], noise=npart)
+        else:
+            inv = invert_reconstructed(sub, part[0], part[1], noise=npart)
+        for k in out:
+            out[k][s:s + m] = np.asarray(getattr(inv, k))[:m]
+        if npart is not None and np.any(no_noise[:m]):
+            nn = no_noise[:m]
+            for k in ("speed_std", "direction_std", "noise"):
+                out[k][s:s + m][nn] = np.nan
+            conv = out["converged"][s:s + m]
+            from .inverse import InverseFlag
+
+            out["flags"][s:s + m] |= np.where(nn & conv, int(InverseFlag.NO_NOISE_ESTIMATE), 0)
+        show(min(n, s + size), n)
+    out["flags"] |= flags_rec
+    avail = None if rec.availability is None else np.asarray(rec.availability)[:, ri]
+    return CorrectedRecords(
+        kind=rec.kind, time=np.asarray(rec.time),
+        heights=np.asarray(rec.heights, np.float64)[ri],
+        measured_speed=np.asarray(measured[0], np.float64),
+        measured_direction=np.asarray(measured[1], np.float64),
+        availability=avail,
+        record_only_heights=tuple(record_only), table_only_heights=tuple(table_only),
+        warnings=rec.warnings, **out)
+
+
+# ------------------------------------------------------------------------------------------
+# writing
+
+_FLAG_DOC = ("flags bits: 1 too few beams, 2 not converged, 4 ill-conditioned, 8 calm, "
+             "16 no noise estimate, 256 corrupt row, 512 low availability, 1024 impossible "
+             "value, 2048 partial interval, 4096 missing in the file")
+
+
+def _fmt(a: np.ndarray, decimals: int) -> np.ndarray:
+    """Fixed-point text of a float array (``nan`` for NaN), vectorised."""
+    a = np.asarray(a, np.float64)
+    finite = np.isfinite(a)
+    scaled = np.round(np.where(finite, a, 0.0) * 10**decimals).astype(np.int64)
+    neg = scaled < 0
+    mag = np.abs(scaled)
+    ip = (mag // 10**decimals).astype(str)
+    fp = np.char.zfill((mag % 10**decimals).astype(str), decimals)
+    text = np.char.add(np.char.add(np.where(neg, "-", ""), ip), np.char.add(".", fp))
+    inf = np.where(a > 0, "inf", "-inf")
+    return np.where(finite, text, np.where(np.isnan(a), "nan", inf))
+
+
+def write_corrected_csv(path, corrected: CorrectedRecords, metadata: dict | None = None, *,
+                        progress: bool = False, chunk_records: int = 8192):
+    """Write corrected records as a long CSV (one row per record and height), atomically and
+    in chunks (bounded memory).
+
+    Header comment lines carry `metadata` and the flag bits; columns: time (ISO 8601, UTC,
+    end of interval), height [m], speed [m/s], direction [deg, meteorological: from,
+    clockwise from north], speed_std [m/s], direction_std [deg], converged [bool],
+    flags [bits], measured_speed [m/s], measured_direction [deg], availability [%],
+    noise [m/s]. Speeds with 4 decimals, directions 3, availability 1.
+    """
+    from .io._common import atomic_path
+
+    c = corrected
+    n, h = c.speed.shape if c.speed.ndim == 2 else (0, c.heights.size)
+    show = _progress("writing CSV", progress)
+    target = Path(path)
+    head = [f"# {k}: {v}" for k, v in (metadata or {}).items()]
+    head.append(f"# {_FLAG_DOC}")
+    head.append("time,height [m],speed [m/s],direction [deg],speed_std [m/s],"
+                "direction_std [deg],converged,flags,measured_speed [m/s],"
+                "measured_direction [deg],availability [%],noise [m/s]")
+    heights = np.array([f"{x:g}" for x in c.heights])
+    avail = c.availability if c.availability is not None else np.full((n, h), np.nan)
+    noise = c.noise if c.noise is not None else np.full((n, h), np.nan)
+    with atomic_path(target) as tmp, open(tmp, "x", encoding="utf-8", newline="\n") as fh:
+        fh.write("\n".join(head) + "\n")
+        show(0, n)
+        for s in range(0, n, chunk_records):
+            e = min(n, s + chunk_records)
+            m = e - s
+            ts = np.datetime_as_string(np.asarray(c.time[s:e]).astype("datetime64[s]"), unit="s")
+            cols = [
+                np.repeat(np.char.add(ts, "Z"), h), np.tile(heights, m),
+                _fmt(c.speed[s:e], 4).ravel(), _fmt(c.direction[s:e], 3).ravel(),
+                _fmt(c.speed_std[s:e], 4).ravel(), _fmt(c.direction_std[s:e], 3).ravel(),
+                np.where(c.converged[s:e], "True", "False").ravel(),
+                c.flags[s:e].astype(np.int64).astype(str).ravel(),
+                _fmt(c.measured_speed[s:e], 4).ravel(), _fmt(c.measured_direction[s:e], 3).ravel(),
+                _fmt(avail[s:e], 1).ravel(), _fmt(noise[s:e], 4).ravel(),
+            ]
+            rows = cols[0]
+            for col in cols[1:]:
+                rows = np.char.add(np.char.add(rows, ","), col)
+            fh.write("\n".join(rows.tolist()))
+            fh.write("\n")
+            show(e, n)
+    return target
+
+
+def write_corrected_netcdf(path, corrected: CorrectedRecords, metadata: dict | None = None):
+    """Write corrected records as a CF-conventions NetCDF file (needs xarray), atomically.
+
+    Dimensions ``time`` (end of interval, UTC) and ``height`` (m); variables with `units`,
+    `long_name` and `standard_name` where CF has one (`wind_speed`, `wind_from_direction`);
+    `flags` with CF `flag_masks` / `flag_meanings`.
+    """
+    from .inverse import InverseFlag
+    from .io._common import atomic_path, import_optional, netcdf_engine
+
+    xr = import_optional("xarray", "netcdf", "write_corrected_netcdf")
+    c = corrected
+    dims = ("time", "height")
+    masks = [int(f) for f in InverseFlag if f] + [int(f) for f in RecordFlag if f]
+    meanings = [f.name.lower() for f in InverseFlag if f] + [f.name.lower() for f in RecordFlag
+                                                             if f]
+
+    def var(a, units, long_name, standard_name=None, **extra):
+        attrs = {"units": units, "long_name": long_name, **extra}
+        if standard_name:
+            attrs["standard_name"] = standard_name
+        return (dims, np.asarray(a), attrs)
+
+    data = {
+        "speed": var(c.speed, "m s-1", "free-stream horizontal wind speed", "wind_speed"),
+        "direction": var(c.direction, "degree", "free-stream wind direction (from, clockwise "
+                         "from north)", "wind_from_direction"),
+        "speed_std": var(c.speed_std, "m s-1", "one-sigma uncertainty of speed"),
+        "direction_std": var(c.direction_std, "degree", "one-sigma uncertainty of direction"),
+        "converged": (dims, np.asarray(c.converged).astype(np.int8),
+                      {"long_name": "inversion converged", "flag_values": np.array([0, 1], np.int8),
+                       "flag_meanings": "false true"}),
+        "flags": (dims, np.asarray(c.flags).astype(np.int32),
+                  {"long_name": "quality flags", "flag_masks": np.array(masks, np.int32),
+                   "flag_meanings": " ".join(meanings)}),
+        "measured_speed": var(c.measured_speed, "m s-1", "horizontal wind speed reported by "
+                              "the instrument", "wind_speed"),
+        "measured_direction": var(c.measured_direction, "degree", "wind direction reported "
+                                  "by the instrument", "wind_from_direction"),
+    }
+    if c.availability is not None:
+        data["availability"] = var(c.availability, "percent", "data availability")
+    if c.noise is not None:
+        data["noise"] = var(c.noise, "m s-1", "noise level used for the uncertainty")
+    ds = xr.Dataset(
+        data_vars=data,
+        coords={"time": ("time", np.asarray(c.time).astype("datetime64[ns]"),
+                         {"long_name": "end of the averaging interval", "standard_name": "time"}),
+                "height": ("height", np.asarray(c.heights), {"units": "m", "long_name":
+                           "height above the lidar", "positive": "up"})},
+        attrs={"Conventions": "CF-1.8", "title": "lidarjax corrected lidar records",
+               **{str(k): str(v) for k, v in (metadata or {}).items()}},
+    )
+    target = Path(path)
+    with atomic_path(target) as tmp:
+        ds.to_netcdf(os.fspath(tmp), engine=netcdf_engine(),
+                     encoding={"time": {"units": "seconds since 1970-01-01 00:00:00",
+                                        "dtype": "float64"}})
+    return target
+
+
+def quality_summary(c: CorrectedRecords) -> list[str]:
+    """Lines for the end of `lidarjax correct`: converged share, availability, flags by kind."""
+    from .inverse import InverseFlag
+
+    total = c.converged.size
+    ok = int(np.count_nonzero(c.converged))
+    lines = [f"converged {ok} of {total} record-heights ({100 * ok / max(total, 1):.1f} %; "
+             f"{c.time.size} records x {c.heights.size} heights)"]
+    if c.availability is not None and np.isfinite(c.availability).any():
+        a = np.where(np.isfinite(c.availability), c.availability, np.inf)
+        lines.append(f"availability: median {np.nanmedian(c.availability):.1f} %, below "
+                     f"{DEFAULT_MIN_AVAILABILITY:g} %: {int(np.count_nonzero(a < DEFAULT_MIN_AVAILABILITY))}")
+    counts = []
+    for flag in list(RecordFlag) + list(InverseFlag):
+        if not flag:
+            continue
+        k = int(np.count_nonzero(np.asarray(c.flags) & int(flag)))
+        if k:
+            counts.append(f"{flag.name.lower()} {k}")
+    lines.append("flags: " + (", ".join(counts) if counts else "none"))
+    if c.converged.any():
+        du = np.nanmedian(np.abs(c.speed - c.measured_speed)[c.converged])
+        std = c.speed_std[c.converged]
+        std_text = (f"median speed_std {np.nanmedian(std):.3f} m/s" if np.isfinite(std).any()
+                    else "no uncertainty (no dispersion in the file; give --noise)")
+        lines.append(f"median |correction| {du:.3f} m/s; {std_text}")
+    return lines
