@@ -571,7 +571,9 @@ def correct_records(
                                                       "direction_std", "noise")}
     out["converged"] = np.zeros((n, h), bool)
     out["flags"] = np.zeros((n, h), np.int64)
-    size = max(1, min(chunk_records, n))
+    # chunk shape: a power of two >= 64 (files of similar length share one compilation, in
+    # this process and in the persistent cache), at most chunk_records
+    size = max(1, min(int(chunk_records), max(64, 1 << max(n - 1, 0).bit_length())))
     show = _progress(f"correcting {Path(rec.path).name}", progress)
     show(0, n)
     for s in range(0, n, size):

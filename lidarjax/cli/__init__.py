@@ -11,14 +11,14 @@ import argparse
 import sys
 
 from . import correct, demo, simulate, table
-from ._common import Terminated, enable_x64, install_signal_handlers, setup_compilation_cache
+from ._common import OneLineParser, Terminated, enable_x64, install_signal_handlers, setup_compilation_cache
 
 #: The command modules, in the order `--help` lists them.
 COMMANDS = (demo, simulate, table, correct)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="lidarjax",
         description="Simulate wind lidars in CFD fields and correct their records.",
     )
@@ -35,7 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # usage error (one line, exit 2) or --help (exit 0)
+        return int(done.code or 0)
     enable_x64(args)
     setup_compilation_cache(args)
     restore = install_signal_handlers()

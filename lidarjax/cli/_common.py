@@ -32,6 +32,13 @@ def enable_x64(args) -> None:
     jax.config.update("jax_enable_x64", bool(args.x64))
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An `ArgumentParser` whose usage errors are one line on stderr (exit 2)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 class Terminated(BaseException):  # noqa: N818 - named like KeyboardInterrupt
     """Raised in the main thread when the process receives SIGTERM."""
 

@@ -44,6 +44,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import sys
+    import time
     from pathlib import Path
 
     from ..io import load_table
@@ -82,9 +83,11 @@ def run(args) -> int:
         check_output_file(nc, inputs=inputs, option="--netcdf")
     table, meta = load_table(args.table, return_metadata=True)
     progress = not args.quiet
-    if progress:
-        say(f"reading {records} ...")
+    t0 = time.perf_counter()
     rec = load_records(records, cnr_threshold=args.cnr_threshold, min_availability=min_avail)
+    if progress:
+        say(f"read {rec.time.size} records x {rec.heights.size} heights from {records} in "
+            f"{time.perf_counter() - t0:.1f} s")
     for w in rec.warnings:
         say(f"warning: {w}")
     for w in table_warnings(meta):

@@ -108,10 +108,11 @@ def run(args) -> int:
         if bad:
             raise ValueError(f"--heights-from {args.heights_from}: the record does not match "
                              f"the table being built: {'; '.join(bad)}")
+    fields = {b: load_field(paths[b]) for b in betas}  # every file checked before computing
     print(f"simulating {len(betas)} CFD runs x {settings.nh} heights ({args.scan}, "
           f"{args.probe} probe) ...", file=sys.stderr)
-    table, _ = build_table(settings, betas, lambda b: load_field(paths[b]), scan,
-                           u_ref=args.u_ref, probe=probe)
+    table, _ = build_table(settings, betas, fields.__getitem__, scan, u_ref=args.u_ref,
+                           probe=probe)
     save_table(out, table, meta)
     bad = np.isnan(np.asarray(table.response)).all(axis=0)
     note = ""

@@ -183,26 +183,33 @@ def _gridded(path: Path, fmt: str, x, y, z, velocity) -> FieldArrays:
 
 
 def _read_npz(path: Path) -> FieldArrays:
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as err:
-        raise ValueError(f"{os.fspath(path)}: not a readable .npz archive ({err})") from None
-    try:
-        with archive as data:
-            names = set(data.files)
-            missing = [n for n in "xyz" if n not in names]
-            wanted = ["x", "y", "z", "velocity"] if not missing and "velocity" in names else \
-                ["x", "y", "z", "u", "v", "w"]
-            missing = [n for n in wanted if n not in names]
-            if missing:
-                raise ValueError(
-                    f"{os.fspath(path)}: missing arrays {', '.join(missing)}; expected x, y, z "
-                    f"and u, v, w (or velocity), found {', '.join(sorted(names)) or 'none'}"
-                )
-            arrays = {n: data[n] for n in wanted}
-    except (OSError, EOFError, zipfile.BadZipFile) as err:  # a truncated or corrupt member
-        raise ValueError(f"{os.fspath(path)}: corrupt .npz archive ({err}); write the field "
-                         "again") from None
+    with open(path, "rb") as fh:  # our handle: closed even when numpy gives up half-way
+        try:
+            archive = np.load(fh, allow_pickle=False)
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
+            raise ValueError(f"{os.fspath(path)}: not a readable .npz archive ({err})") from None
+        if not hasattr(archive, "files"):
+            raise ValueError(f"{os.fspath(path)}: a single array (.npy), not an .npz archive "
+                             "with x, y, z and velocity")
+        try:
+            with archive as data:
+                names = set(data.files)
+                missing = [n for n in "xyz" if n not in names]
+                wanted = ["x", "y", "z", "velocity"] if not missing and "velocity" in names \
+                    else ["x", "y", "z", "u", "v", "w"]
+                missing = [n for n in wanted if n not in names]
+                if missing:
+                    raise ValueError(
+                        f"{os.fspath(path)}: missing arrays {', '.join(missing)}; expected x, "
+                        f"y, z and u, v, w (or velocity), found "
+                        f"{', '.join(sorted(names)) or 'none'}"
+                    )
+                arrays = {n: data[n] for n in wanted}
+        except (OSError, EOFError, zipfile.BadZipFile, ValueError) as err:  # a cut member
+            if isinstance(err, ValueError) and str(err).startswith(os.fspath(path)):
+                raise
+            raise ValueError(f"{os.fspath(path)}: corrupt .npz archive ({err}); write the "
+                             "field again") from None
     for n, a in arrays.items():
         _check_real(path, n, a)
     if "velocity" in arrays:
