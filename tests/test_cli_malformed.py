@@ -21,7 +21,7 @@ import pytest
 
 import lidarjax as lj
 from lidarjax.cli import main
-from lidarjax.io import Settings, save_field_npz, save_table, write_settings, write_sta
+from lidarjax.io import Settings, save_table, write_settings, write_sta
 from lidarjax.records import RecordFlag
 
 HEIGHTS = np.array([40.0, 54.0, 74.0])
@@ -29,15 +29,18 @@ EPSILON = 21.0
 N = 6
 
 
+def _gain(d):
+    """Speed-up of the analytic table, (s, h): smooth in direction, different per height."""
+    return 1.0 - 0.05 * np.cos(np.deg2rad(d))[:, None] * (1 + 0.1 * np.arange(3))[None, :]
+
+
 def _analytic_table():
     """A Windcube V2 table whose response is a mild, direction-dependent distortion."""
     scan = lj.windcube_v2()
     d = np.arange(0.0, 360.0, 30.0)
     vec = np.asarray(scan.directions())  # (b, 3) lidar frame
-    rad = np.deg2rad(d)
     free = np.stack([-np.sin(np.deg2rad(d)), -np.cos(np.deg2rad(d)), 0 * d], -1)  # (s, 3)
-    gain = 1.0 - 0.05 * np.cos(rad)[:, None] * (1 + 0.1 * np.arange(3))[None, :]  # (s, h)
-    rec = gain[..., None] * free[:, None, :]  # (s, h, 3)
+    rec = _gain(d)[..., None] * free[:, None, :]  # (s, h, 3)
     # beam vectors in the north frame: the lidar's +y (beam 0) points to EPSILON
     c, s_ = np.cos(np.deg2rad(-EPSILON)), np.sin(np.deg2rad(-EPSILON))
     rot = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
@@ -58,9 +61,9 @@ def case(tmp_path_factory):
     save_table(root / "table.npz", table, meta)
     rng = np.random.default_rng(1)
     u, d = rng.uniform(4, 14, N), rng.uniform(0, 360, N)
-    rep = u[:, None, None] * np.asarray(table.reconstructed_at(d))
-    speed = np.hypot(rep[..., 0], rep[..., 1])
-    direction = np.asarray(lj.wind_direction(rep))
+    # the table's reconstructed response is gain(d, h) along the free stream (numpy, no jit)
+    speed = u[:, None] * _gain(d)
+    direction = np.broadcast_to(d[:, None], speed.shape).copy()
     time = np.datetime64("2024-03-01T00:10") + np.arange(N) * np.timedelta64(10, "m")
     good = dict(time=time, heights=HEIGHTS, speed=speed, direction=direction,
                 speed_std=np.full_like(speed, 0.6), availability=np.full_like(speed, 98.0))
@@ -70,12 +73,13 @@ def case(tmp_path_factory):
     write_settings(root / "settings.dat", Settings(
         zone=2, verbose=1, height=20.0, nh=2, gamma=0.0, beta=0.0, psi=0.0, epsilon=EPSILON,
         betas=betas, locations=np.tile([0.0, 0.0, 0.5], (3, 1))))
-    x = np.linspace(-30, 30, 7)
-    z = np.linspace(0, 30, 7)
+    x = np.linspace(-60, 60, 7)
+    z = np.linspace(0, 100, 6)
     (root / "runs").mkdir()
+    vel = np.zeros((7, 7, 6, 3))
+    vel[..., 0] = -10.0
     for b in betas:
-        f = lj.GridField.from_function(lj.scenes.uniform(10.0, 90.0).sample, x, x, z)
-        save_field_npz(root / "runs" / f"p_{int(b)}.npz", f)
+        np.savez(root / "runs" / f"p_{int(b)}.npz", x=x, y=x, z=z, velocity=vel)
     return {"root": root, "table": root / "table.npz", "good": good, "meta": meta,
             "truth": (u, d)}
 
@@ -352,8 +356,8 @@ def test_no_common_heights(case, capsys):
 def test_partial_heights_are_named_and_the_rest_corrected(case, capsys):
     g = case["good"]
     p = case["root"] / "partial.sta"
-    heights = np.array([40.0, 54.0, 60.0, 200.0])
-    cols = {k: np.concatenate([g[k][:, :2], np.full((N, 2), 5.0)], axis=1)
+    heights = np.array([40.0, 54.0, 60.0, 74.0, 200.0])
+    cols = {k: np.insert(np.concatenate([g[k], np.full((N, 1), 5.0)], axis=1), 2, 5.0, axis=1)
             for k in ("speed", "direction", "speed_std", "availability")}
     write_sta(p, time=g["time"], heights=heights, **cols, scan_angle=28.0,
               direction_offset=EPSILON)
@@ -363,9 +367,9 @@ def test_partial_heights_are_named_and_the_rest_corrected(case, capsys):
     named = [ln for ln in err.splitlines() if "has no heights 60, 200" in ln]
     assert len(named) == 1
     body = read_csv(out)
-    assert body.shape == (N * 2, 12)
-    np.testing.assert_allclose(body[:, 2].astype(float).reshape(N, 2), case["truth"][0][:, None]
-                               * np.ones((1, 2)), atol=2e-3)
+    assert body.shape == (N * 3, 12)
+    np.testing.assert_allclose(body[:, 2].astype(float).reshape(N, 3), case["truth"][0][:, None]
+                               * np.ones((1, 3)), atol=5e-3)
 
 
 @pytest.mark.parametrize("name, edit, flag", [
@@ -394,7 +398,7 @@ def test_bad_value_is_flagged_good_rows_untouched(case, capsys, name, edit, flag
     ok = np.ones((N, 3), bool)
     ok[2, 1] = False
     u = np.broadcast_to(case["truth"][0][:, None], (N, 3))
-    np.testing.assert_allclose(got[ok], u[ok], atol=2e-3)
+    np.testing.assert_allclose(got[ok], u[ok], atol=5e-3)  # the spline of 12 directions
     assert np.all(flags[ok] & ~0xFF == 0)
     assert flag.name.lower() in text  # the quality summary counts it
 
@@ -416,7 +420,7 @@ def test_csv_and_netcdf_are_self_describing(case, capsys):
         assert len(masks) == len(meanings) and 1024 in masks
         assert meanings[masks.index(1024)] == "impossible_value"
         np.testing.assert_allclose(ds["speed"].values, case["truth"][0][:, None] * np.ones(3),
-                                   atol=2e-3)
+                                   atol=5e-3)
         assert np.all(ds["speed_std"].values > 0)  # from the dispersion, not NaN
 
 
@@ -511,21 +515,25 @@ def test_table_heights_and_metadata(case, capsys):
 def test_simulate_writes_flags_and_explains_nan(case, capsys):
     root = case["root"]
     settings = root / "settings_high.dat"
-    settings.write_text(_settings_text("2\t1\t60\t2\t0\t0\t0\t21"))  # 30 and 60 m: above grid
+    # three heights like the table test (one compiled shape); 150 m is above the 100 m grid
+    settings.write_text(_settings_text("2\t1\t150\t3\t0\t0\t0\t21",
+                                       "heights\t40\t54\t150\n"))
     out = root / "sim_out"
     rc, _, err = run_cli(["simulate", settings, "--field", root / "runs" / "p_{beta}.npz",
                           "--all", "--out", out], capsys)
     assert rc == 0, err
-    warn = [ln for ln in err.splitlines() if "most values are NaN" in ln]
+    warn = [ln for ln in err.splitlines() if "3 of 9 height-runs are NaN" in ln]
     assert len(warn) == 1 and "grid is too low" in warn[0]
     cols = lj.io.read_seed_output(out / "windcube simulation 0 degrees.dat")
-    assert np.all(cols["flags"].astype(int) & int(lj.Flag.BEAM_OUTSIDE))
+    outside = [False, False, True]  # only the top height leaves the grid
+    assert list(cols["flags"].astype(int) & int(lj.Flag.BEAM_OUTSIDE) > 0) == outside
+    assert np.isnan(cols["U_mag_lidar"][2]) and np.isfinite(cols["U_mag_lidar"][:2]).all()
     csv = lj.io.read_table_csv(out / "simulation_0.csv")
-    assert np.all(csv.columns["flags"].astype(int) & int(lj.Flag.BEAM_OUTSIDE))
+    assert list(csv.columns["flags"].astype(int) & int(lj.Flag.BEAM_OUTSIDE) > 0) == outside
     if (out / "simulation_0.nc").exists():
         xr = pytest.importorskip("xarray")
         with xr.open_dataset(out / "simulation_0.nc") as ds:
-            assert np.all(ds["flags"].values.astype(int) & int(lj.Flag.BEAM_OUTSIDE))
+            assert list(ds["flags"].values.astype(int) & int(lj.Flag.BEAM_OUTSIDE) > 0) == outside
 
 
 # ------------------------------------------------------------------------------------------
@@ -533,7 +541,18 @@ def test_simulate_writes_flags_and_explains_nan(case, capsys):
 
 _SLOW_WRITER = textwrap.dedent("""
     import sys, time
+    import numpy as np
     import lidarjax.records as r
+
+    def fake_correct(table, path, *, records=None, **kw):  # no compilation: about the writer
+        z = np.zeros(records.speed.shape)
+        return r.CorrectedRecords(
+            kind=records.kind, time=records.time, heights=records.heights, speed=records.speed,
+            direction=records.direction, speed_std=z, direction_std=z, converged=z == 0,
+            flags=z.astype(int), measured_speed=records.speed,
+            measured_direction=records.direction)
+
+    r.correct_records = fake_correct
     real = r._progress
     def slow(label, enabled):
         show = real(label, False)
@@ -586,6 +605,6 @@ def test_zip_member_corruption_in_table(case, capsys, tmp_path):
             np.save(buf, v)
             data = buf.getvalue()
             zf.writestr(f"{k}.npy", data[: len(data) // 2] if k == "response" else data)
-    rc, _, err = run_cli(["correct", "--table", path, "--records", case["root"] / "good.sta", "--out", tmp_path / "o.csv",
-        "--quiet"], capsys)
+    rc, _, err = run_cli(["correct", "--table", path, "--records", case["root"] / "good.sta",
+                          "--out", tmp_path / "o.csv", "--quiet"], capsys)
     assert_one_line_error(rc, err, "cut.npz")

@@ -31,12 +31,15 @@ def register(sub) -> None:
 
 
 def nan_reasons(sims, fields, settings, paths) -> str | None:
-    """One line explaining why most values are NaN (decoding `lidarjax.Flag`), or None."""
+    """One line explaining why values are NaN (decoding `lidarjax.Flag`), or None."""
     from ..flags import Flag
 
     lidar = np.concatenate([np.asarray(s.lidar_velocity)[..., 0].ravel() for s in sims.values()])
-    if lidar.size == 0 or np.isfinite(lidar).mean() >= 0.5:
+    n_nan = int(np.count_nonzero(~np.isfinite(lidar)))
+    if lidar.size == 0 or n_nan == 0:
         return None
+    head = ("most values are NaN" if n_nan > lidar.size / 2 else
+            f"{n_nan} of {lidar.size} height-runs are NaN")
     reasons = []
     for b, sim in sims.items():
         f = fields[b]
@@ -63,9 +66,9 @@ def nan_reasons(sims, fields, settings, paths) -> str | None:
             reasons.append(f"beta {b:g}: {n} heights have beams outside the grid or in a solid "
                            "(NaN cells)")
     if not reasons:
-        return "most values are NaN; see the flags column (lidarjax.Flag bits)"
+        return f"{head}; see the flags column (lidarjax.Flag bits)"
     more = f" (+{len(reasons) - 2} more)" if len(reasons) > 2 else ""
-    return "most values are NaN: " + "; ".join(reasons[:2]) + more
+    return f"{head}: " + "; ".join(reasons[:2]) + more
 
 
 def run(args) -> int:
