@@ -641,18 +641,66 @@ _FLAG_DOC = ("flags bits: 1 too few beams, 2 not converged, 4 ill-conditioned, 8
              "value, 2048 partial interval, 4096 missing in the file")
 
 
-def _fmt(a: np.ndarray, decimals: int) -> np.ndarray:
-    """Fixed-point text of a float array (``nan`` for NaN), vectorised."""
-    a = np.asarray(a, np.float64)
+def _text_bytes(values: np.ndarray, decimals: int, width: int = 0) -> np.ndarray:
+    """Fixed-point text of a float array as a right-aligned ``(n, width)`` uint8 array padded
+    with zero bytes (dropped when the row is assembled): ``-12.3456``, ``nan``, ``inf``.
+    Vectorised over the values (one numpy pass per character position)."""
+    a = np.asarray(values, np.float64).reshape(-1)
     finite = np.isfinite(a)
-    scaled = np.round(np.where(finite, a, 0.0) * 10**decimals).astype(np.int64)
-    neg = scaled < 0
-    mag = np.abs(scaled)
-    ip = (mag // 10**decimals).astype(str)
-    fp = np.char.zfill((mag % 10**decimals).astype(str), decimals)
-    text = np.char.add(np.char.add(np.where(neg, "-", ""), ip), np.char.add(".", fp))
-    inf = np.where(a > 0, "inf", "-inf")
-    return np.where(finite, text, np.where(np.isnan(a), "nan", inf))
+    scale = 10 ** decimals
+    big = finite & (np.abs(a) >= 1e12)
+    m = np.round(np.abs(np.where(finite & ~big, a, 0.0)) * scale).astype(np.int64)
+    neg = finite & ~big & (a < 0) & (m > 0)
+    width = width or (14 + decimals)
+    out = np.zeros((a.size, width), np.uint8)
+    pos = width - 1
+    for _ in range(decimals):
+        out[:, pos] = 48 + m % 10
+        m //= 10
+        pos -= 1
+    if decimals:
+        out[:, pos] = 46  # "."
+        pos -= 1
+    out[:, pos] = 48 + m % 10  # at least one integer digit
+    m //= 10
+    start = np.full(a.size, pos)
+    pos -= 1
+    while pos > 0 and m.any():
+        more = m > 0
+        out[more, pos] = 48 + m[more] % 10
+        start[more] = pos
+        m //= 10
+        pos -= 1
+    out[neg, start[neg] - 1] = 45  # "-"
+    special = ((b"nan", np.isnan(a)), (b"inf", np.isposinf(a)), (b"-inf", np.isneginf(a)))
+    for text, mask in special:
+        if mask.any():
+            out[mask] = 0
+            out[np.ix_(mask, np.arange(width - len(text), width))] = np.frombuffer(text, np.uint8)
+    if big.any():  # beyond fixed point: Python's repr (rare: never a wind speed)
+        out[big] = 0
+        for i in np.flatnonzero(big):
+            t = repr(float(a[i])).encode()[:width]
+            out[i, width - len(t):] = np.frombuffer(t, np.uint8)
+    return out
+
+
+def _const_bytes(texts, index) -> np.ndarray:
+    """``(n, w)`` uint8 rows of the byte strings `texts[index]`, zero-padded on the right."""
+    arr = np.asarray(texts, dtype="S")
+    return arr.view(np.uint8).reshape(arr.size, -1)[np.asarray(index)]
+
+
+def _csv_chunk(columns: list[np.ndarray]) -> bytes:
+    """Join ``(n, w_i)`` uint8 text columns with commas and newlines, dropping zero bytes."""
+    n = columns[0].shape[0]
+    comma = np.full((n, 1), 44, np.uint8)
+    parts = []
+    for i, c in enumerate(columns):
+        parts.append(c)
+        parts.append(comma if i < len(columns) - 1 else np.full((n, 1), 10, np.uint8))
+    block = np.concatenate(parts, axis=1)
+    return block[block != 0].tobytes()
 
 
 def write_corrected_csv(path, corrected: CorrectedRecords, metadata: dict | None = None, *,
@@ -677,30 +725,28 @@ def write_corrected_csv(path, corrected: CorrectedRecords, metadata: dict | None
     head.append("time,height [m],speed [m/s],direction [deg],speed_std [m/s],"
                 "direction_std [deg],converged,flags,measured_speed [m/s],"
                 "measured_direction [deg],availability [%],noise [m/s]")
-    heights = np.array([f"{x:g}" for x in c.heights])
+    heights = [f"{x:g}".encode() for x in c.heights]
     avail = c.availability if c.availability is not None else np.full((n, h), np.nan)
     noise = c.noise if c.noise is not None else np.full((n, h), np.nan)
-    with atomic_path(target) as tmp, open(tmp, "x", encoding="utf-8", newline="\n") as fh:
-        fh.write("\n".join(head) + "\n")
+    with atomic_path(target) as tmp, open(tmp, "xb") as fh:
+        fh.write(("\n".join(head) + "\n").encode())
         show(0, n)
         for s in range(0, n, chunk_records):
             e = min(n, s + chunk_records)
             m = e - s
-            ts = np.datetime_as_string(np.asarray(c.time[s:e]).astype("datetime64[s]"), unit="s")
+            stamps = np.char.add(np.datetime_as_string(
+                np.asarray(c.time[s:e]).astype("datetime64[s]"), unit="s"), "Z").astype("S")
             cols = [
-                np.repeat(np.char.add(ts, "Z"), h), np.tile(heights, m),
-                _fmt(c.speed[s:e], 4).ravel(), _fmt(c.direction[s:e], 3).ravel(),
-                _fmt(c.speed_std[s:e], 4).ravel(), _fmt(c.direction_std[s:e], 3).ravel(),
-                np.where(c.converged[s:e], "True", "False").ravel(),
-                c.flags[s:e].astype(np.int64).astype(str).ravel(),
-                _fmt(c.measured_speed[s:e], 4).ravel(), _fmt(c.measured_direction[s:e], 3).ravel(),
-                _fmt(avail[s:e], 1).ravel(), _fmt(noise[s:e], 4).ravel(),
+                _const_bytes(stamps, np.repeat(np.arange(m), h)),
+                _const_bytes(heights, np.tile(np.arange(h), m)),
+                _text_bytes(c.speed[s:e], 4), _text_bytes(c.direction[s:e], 3),
+                _text_bytes(c.speed_std[s:e], 4), _text_bytes(c.direction_std[s:e], 3),
+                _const_bytes([b"False", b"True"], np.asarray(c.converged[s:e]).astype(int).ravel()),
+                _text_bytes(np.asarray(c.flags[s:e], np.float64), 0),
+                _text_bytes(c.measured_speed[s:e], 4), _text_bytes(c.measured_direction[s:e], 3),
+                _text_bytes(avail[s:e], 1), _text_bytes(noise[s:e], 4),
             ]
-            rows = cols[0]
-            for col in cols[1:]:
-                rows = np.char.add(np.char.add(rows, ","), col)
-            fh.write("\n".join(rows.tolist()))
-            fh.write("\n")
+            fh.write(_csv_chunk(cols))
             show(e, n)
     return target
 
