@@ -253,9 +253,10 @@ def load_records(path, *, cnr_threshold: float | None = None, period: str = "10m
         )
     if suffix in (".rtd", ".stdrtd"):
         rec = read_rtd(p)
-        kwargs = {}
-        if cnr_threshold is not None:
-            kwargs["min_cnr"] = float(cnr_threshold)
+        # the instrument's CNR filter: --cnr-threshold, else the header's CNRThreshold
+        threshold = float(cnr_threshold) if cnr_threshold is not None else _float_attr(
+            rec, "cnr_threshold")
+        kwargs = {"min_cnr": threshold} if math.isfinite(threshold) else {}
         beams = group_rtd(rec, period, **kwargs)
         los = np.array(beams.los, np.float64)
         shape = los.shape[:2]
@@ -272,8 +273,6 @@ def load_records(path, *, cnr_threshold: float | None = None, period: str = "10m
         los[flags != 0] = np.nan
         missing = (flags == 0) & (np.isfinite(los).sum(-1) < 3)
         flags |= np.where(missing, int(RecordFlag.MISSING), 0)
-        threshold = cnr_threshold if cnr_threshold is not None else _float_attr(
-            rec, "cnr_threshold")
         return RecordSet(
             kind="rtd", path=str(p), instrument=_instrument_of(rec, "rtd"),
             time=np.asarray(beams.time, "datetime64[s]"), heights=np.asarray(beams.heights, float),

@@ -608,3 +608,26 @@ def test_zip_member_corruption_in_table(case, capsys, tmp_path):
     rc, _, err = run_cli(["correct", "--table", path, "--records", case["root"] / "good.sta",
                           "--out", tmp_path / "o.csv", "--quiet"], capsys)
     assert_one_line_error(rc, err, "cut.npz")
+
+
+def test_compilation_cache_folder_and_opt_out(monkeypatch, tmp_path):
+    import argparse
+
+    import jax
+
+    from lidarjax.cli._common import setup_compilation_cache
+
+    before = jax.config.jax_compilation_cache_dir
+    assert before is None  # importing lidarjax (and running the CLI tests) leaves JAX alone
+    try:
+        monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+        monkeypatch.setenv("LIDARJAX_NO_CACHE", "1")
+        assert setup_compilation_cache(argparse.Namespace(no_cache=False)) is None
+        monkeypatch.setenv("LIDARJAX_NO_CACHE", "0")
+        assert setup_compilation_cache(argparse.Namespace(no_cache=True)) is None
+        assert jax.config.jax_compilation_cache_dir is None
+        folder = setup_compilation_cache(argparse.Namespace(no_cache=False))
+        assert folder == tmp_path / "lidarjax" / "jax" and folder.is_dir()
+        assert jax.config.jax_compilation_cache_dir == str(folder)
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
