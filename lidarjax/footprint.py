@@ -1,7 +1,7 @@
 """Where a lidar looks: the box of CFD space a scan touches, for cropping big fields.
 
 `scan_bounds` gives the axis-aligned box (absolute CFD coordinates) that holds every point
-`lidarjax.simulate` samples for a scan, mount(s), heights and probe: each beam's probe
+`lidarjax.simulate` samples for a scan, mount(s) (tilt included), heights and probe: each beam's probe
 nodes from ``f - reach`` to ``f + reach`` with ``reach = min(max |offset|, f)`` (nodes
 beyond the probe's cut at the lidar get no weight, so they need no field) and, with
 ``point_reference=True``, the column above the lidar. `lidarjax.GridField.crop` then keeps
@@ -23,7 +23,7 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 
 from ._precision import is_concrete
-from .frames import lidar_to_cfd_rotation
+from .frames import body_to_cfd_rotation
 from .mount import Mount
 from .probe import AbstractProbe, PointProbe
 from .scan import Scan
@@ -81,7 +81,7 @@ def scan_bounds(
         if not is_concrete(mount):
             raise ValueError("scan_bounds: needs concrete mounts (not traced).")
         loc = np.asarray(mount.location, np.float64) + np.asarray(mount.location_lo, np.float64)
-        rot = np.asarray(lidar_to_cfd_rotation(mount), np.float64)
+        rot = np.asarray(body_to_cfd_rotation(mount), np.float64)
         n_cfd = n_lidar @ rot.T  # (b, 3)
         pts = [loc + r[..., None] * n_cfd for r in (near, far)]
         if point_reference:

@@ -20,7 +20,13 @@ from .angles import horizontal_speed, wind_direction
 from .corrections import DEFAULT_RATIO_TOL, correction_factors
 from .field import AbstractField
 from .flags import Flag
-from .frames import cfd_to_north_rotation, lidar_to_cfd_rotation, lidar_to_north_rotation, rotate
+from .frames import (
+    cfd_to_north_rotation,
+    lidar_to_cfd_rotation,
+    lidar_to_north_rotation,
+    rotate,
+    tilt_rotation,
+)
 from .mount import Mount
 from .probe import AbstractProbe, PointProbe
 from .scan import ILL_CONDITIONED, Scan, reconstruct
@@ -33,7 +39,9 @@ class Simulation(eqx.Module):
 
     - `heights`: ``(h,)`` measurement heights above the lidar, m.
     - `points`: ``(h, b, 3)`` beam measurement points (focus) in CFD coordinates, m.
-    - `directions`: ``(b, 3)`` beam unit vectors in the CFD frame.
+    - `directions`: ``(b, 3)`` beam unit vectors in the CFD frame (tilt included).
+    - `ranges`: ``(h, b)`` focus ranges along the beams, m (``h / cos(cone)``; ``h`` for the
+      vertical beam), whatever the tilt: the instrument assumes it is level.
     - `los`: ``(h, b)`` LOS velocities, m/s, positive away from the lidar.
     - `lidar_velocity`: ``(h, 3)`` the instrument's reconstructed vector, north frame, m/s.
     - `point_velocity`: ``(h, 3)`` true velocity directly above the lidar, north frame
@@ -49,6 +57,7 @@ class Simulation(eqx.Module):
     heights: Float[Array, " h"]
     points: Float[Array, "h b 3"]
     directions: Float[Array, "b 3"]
+    ranges: Float[Array, "h b"]
     los: Float[Array, "h b"]
     lidar_velocity: Float[Array, "h 3"]
     point_velocity: Float[Array, "h 3"] | None
@@ -150,9 +159,12 @@ def simulate(
 
     - `field`: a `lidarjax.GridField` or an analytic scene (CFD frame, m/s).
     - `scan`: beam geometry and reconstruction (`lidarjax.windcube_v1` etc.).
-    - `mount`: location and angles (`lidarjax.Mount`, degrees and metres).
+    - `mount`: location, angles and tilt (`lidarjax.Mount`, degrees and metres).
     - `heights`: ``(h,)`` measurement heights above the lidar in metres; a tilted beam's focus
-      for height ``h`` is at range ``h / cos(cone)``, the vertical beam's at ``h``.
+      for height ``h`` is at range ``h / cos(cone)``, the vertical beam's at ``h``, along the
+      beams as tilted by the mount's pitch and roll (for a nacelle lidar, ``pitch = -90``,
+      they are distances along the instrument axis). The point reference is sampled at
+      ``h`` straight above the lidar (level).
     - `u_ref`: free-stream vector ``(u, v, w)`` in the CFD frame (m/s); gives `free_velocity`
       and the ``cff_*`` factors. Without it none of that is compiled.
     - `probe`: probe volume (default `lidarjax.PointProbe`, which compiles no quadrature;
@@ -252,10 +264,11 @@ def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_ref
     origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo, dtype)
     scan = jax.tree_util.tree_map(cast, scan)
     angles = jax.tree_util.tree_map(cast, mount)
-    n_lidar = scan.directions()  # (b, 3)
+    n_body = scan.directions()  # (b, 3), instrument axes
+    tilt = tilt_rotation(angles.pitch, angles.roll)  # body -> level lidar frame
     to_cfd = lidar_to_cfd_rotation(angles)
-    n_cfd = rotate(to_cfd, n_lidar)
-    ranges = heights[:, None] / n_lidar[None, :, 2]  # (h, b): h / cos(cone)
+    n_cfd = rotate(to_cfd @ tilt, n_body)
+    ranges = heights[:, None] / n_body[None, :, 2]  # (h, b): h / cos(cone), as if level
     los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)
 
     # NaN (beams outside the field or in a solid) is masked out of every computation below
@@ -264,6 +277,8 @@ def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_ref
     beam_ok = jnp.all(jnp.isfinite(los), axis=-1)  # (h,)
     los_safe = jnp.where(jnp.isfinite(los), los, 0)
     to_north = lidar_to_north_rotation(angles)
+    if scan.tilt_compensation:  # the method's formulas with the true (level) directions
+        to_north = to_north @ tilt
     lidar_safe = rotate(to_north, reconstruct(scan, los_safe))
     lidar_velocity = jnp.where(beam_ok[:, None], lidar_safe, jnp.nan)
     cfd_to_north = cfd_to_north_rotation(angles)
@@ -303,6 +318,7 @@ def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_ref
         heights=heights,
         points=points,
         directions=n_cfd,
+        ranges=ranges,
         los=los,
         lidar_velocity=lidar_velocity,
         point_velocity=point_velocity,

@@ -3,8 +3,11 @@
 Frames (all right-handed, ``z`` up, metres and m/s):
 
 - **CFD frame**: the coordinates of the field (a grid or an analytic scene).
-- **Lidar frame**: origin at the lidar, ``+y`` towards beam S0 (azimuth 0), ``+x`` towards
-  beam S1 (azimuth 90, clockwise from ``+y`` seen from above), ``+z`` up.
+- **Body frame**: the instrument's own axes: ``+x`` towards beam S1, ``+y`` towards beam S0,
+  ``+z`` along the instrument axis. Scans (`lidarjax.Scan`) define their beams in it.
+- **Lidar frame** (the level lidar frame): origin at the lidar, ``+y`` towards beam S0
+  (azimuth 0) and ``+x`` towards beam S1 (azimuth 90, clockwise from ``+y`` seen from above)
+  as they would point on a level mount, ``+z`` up. For a level mount it is the body frame.
 - **North frame**: the lidar frame rotated by the instrument's software north offset
   ``epsilon``; reconstructed, point and free-stream vectors are reported in it.
 
@@ -13,6 +16,14 @@ equation 13): ``R(t) = [[cos t, -sin t, 0], [sin t, cos t, 0], [0, 0, 1]]``.
 
 The chain (angles of `lidarjax.Mount`, degrees):
 
+- body -> lidar (the installation's tilt): ``T = R_x(pitch) @ R_y(roll)`` with
+  ``R_x(a) = [[1, 0, 0], [0, cos a, -sin a], [0, sin a, cos a]]`` and
+  ``R_y(b) = [[cos b, 0, sin b], [0, 1, 0], [-sin b, 0, cos b]]``: positive pitch raises the
+  S0 (``+y``) side, positive roll lowers the S1 (``+x``) side. ``pitch = -90`` points the
+  instrument axis along the lidar's ``+y`` (a forward-looking nacelle lidar: mount it with
+  ``+y`` along the nacelle axis); the body ``+x`` stays the lidar's ``+x``. Beams keep their
+  focus ranges ``h / cos(cone)`` along the tilted directions (the instrument assumes it is
+  level); the point reference and the free stream stay level;
 - velocity CFD -> lidar: rotate by ``psi``, then by ``-(beta + gamma)``, i.e.
   ``v_lidar = R(psi - beta - gamma) v_cfd``;
 - position lidar -> CFD: the exact inverse, ``p_cfd = R(beta + gamma - psi) p_lidar + location``;
@@ -30,7 +41,11 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
+    "rotation_x",
+    "rotation_y",
     "rotation_z",
+    "tilt_rotation",
+    "body_to_cfd_rotation",
     "lidar_to_cfd_rotation",
     "cfd_to_lidar_rotation",
     "lidar_to_north_rotation",
@@ -48,6 +63,42 @@ def rotation_z(angle_deg: Float[ArrayLike, ""]) -> Float[Array, "3 3"]:
     return jnp.stack(
         [jnp.stack([c, -s, o]), jnp.stack([s, c, o]), jnp.stack([o, o, i])]
     )
+
+
+def rotation_x(angle_deg: Float[ArrayLike, ""]) -> Float[Array, "3 3"]:
+    """``R_x(a) = [[1, 0, 0], [0, cos a, -sin a], [0, sin a, cos a]]`` for `angle_deg` degrees
+    (rotates ``+y`` towards ``+z``)."""
+    t = jnp.deg2rad(jnp.asarray(angle_deg))
+    c, s = jnp.cos(t), jnp.sin(t)
+    o, i = jnp.zeros_like(t), jnp.ones_like(t)
+    return jnp.stack(
+        [jnp.stack([i, o, o]), jnp.stack([o, c, -s]), jnp.stack([o, s, c])]
+    )
+
+
+def rotation_y(angle_deg: Float[ArrayLike, ""]) -> Float[Array, "3 3"]:
+    """``R_y(b) = [[cos b, 0, sin b], [0, 1, 0], [-sin b, 0, cos b]]`` for `angle_deg` degrees
+    (rotates ``+z`` towards ``+x``)."""
+    t = jnp.deg2rad(jnp.asarray(angle_deg))
+    c, s = jnp.cos(t), jnp.sin(t)
+    o, i = jnp.zeros_like(t), jnp.ones_like(t)
+    return jnp.stack(
+        [jnp.stack([c, o, s]), jnp.stack([o, i, o]), jnp.stack([-s, o, c])]
+    )
+
+
+def tilt_rotation(
+    pitch_deg: Float[ArrayLike, ""], roll_deg: Float[ArrayLike, ""]
+) -> Float[Array, "3 3"]:
+    """The installation's tilt, body -> level lidar frame: ``T = R_x(pitch) @ R_y(roll)``
+    (degrees). Positive pitch raises the S0 (``+y``) side, positive roll lowers the S1
+    (``+x``) side; ``pitch = -90`` points the instrument axis along the lidar's ``+y``."""
+    return rotation_x(pitch_deg) @ rotation_y(roll_deg)
+
+
+def body_to_cfd_rotation(mount) -> Float[Array, "3 3"]:
+    """Beam directions body -> CFD frame: ``R(beta + gamma - psi) @ T(pitch, roll)``."""
+    return lidar_to_cfd_rotation(mount) @ tilt_rotation(mount.pitch, mount.roll)
 
 
 def rotate(matrix: Float[Array, "3 3"], vectors: Float[Array, "... 3"]) -> Float[Array, "... 3"]:

@@ -1,4 +1,4 @@
-"""How the lidar sits in the CFD frame: location and the seed's four angles."""
+"""How the lidar sits in the CFD frame: location, the seed's four angles and the tilt."""
 
 from __future__ import annotations
 
@@ -27,6 +27,19 @@ class Mount(eqx.Module):
       points upstream, as in the seed), degrees.
     - `epsilon`: the instrument's software north offset, degrees; reconstructed vectors are
       rotated by ``-epsilon`` into the north frame.
+    - `pitch`, `roll`: the installation's tilt, degrees. A vector in the lidar's body frame
+      (``x`` towards S1, ``y`` towards S0, ``z`` along the instrument axis) maps to the level
+      lidar frame by ``T = R_x(pitch) @ R_y(roll)``, with
+      ``R_x(a) = [[1, 0, 0], [0, cos a, -sin a], [0, sin a, cos a]]`` and
+      ``R_y(b) = [[cos b, 0, sin b], [0, 1, 0], [-sin b, 0, cos b]]``. So positive pitch
+      raises the S0 (``+y``) side, and positive roll lowers the S1 (``+x``) side. The level
+      lidar frame then goes through the chain above unchanged (beta, gamma, psi to CFD;
+      epsilon to north). Beams focus at range ``h / cos(cone)`` along the tilted beams (the
+      instrument assumes a level mount), the vertical beam at ``h``; the point reference and
+      the free stream stay level. Whether the reconstruction knows the tilt is the scan's
+      `tilt_compensation`. A forward-looking nacelle lidar is the same chain:
+      ``pitch = -90`` points the instrument axis along the lidar's ``+y`` (then ``heights``
+      are distances along that axis).
 
     See `lidarjax.frames` for the chain these angles define.
     """
@@ -37,6 +50,8 @@ class Mount(eqx.Module):
     gamma: Float[Array, ""]
     psi: Float[Array, ""]
     epsilon: Float[Array, ""]
+    pitch: Float[Array, ""]
+    roll: Float[Array, ""]
 
     def __init__(
         self,
@@ -45,8 +60,12 @@ class Mount(eqx.Module):
         gamma: Float[ArrayLike, ""] = 0.0,
         psi: Float[ArrayLike, ""] = 0.0,
         epsilon: Float[ArrayLike, ""] = 0.0,
+        pitch: Float[ArrayLike, ""] = 0.0,
+        roll: Float[ArrayLike, ""] = 0.0,
     ):
-        if is_concrete(location, beta, gamma, psi, epsilon):
+        angles = {"beta": beta, "gamma": gamma, "psi": psi, "epsilon": epsilon,
+                  "pitch": pitch, "roll": roll}
+        if is_concrete(location, *angles.values()):
             loc = np.asarray(location, dtype=np.float64)
             if loc.shape != (3,):
                 raise ValueError(
@@ -55,7 +74,7 @@ class Mount(eqx.Module):
                 )
             if not np.all(np.isfinite(loc)):
                 raise ValueError(f"Mount: `location` must be finite, got {loc.tolist()}.")
-            for name, val in (("beta", beta), ("gamma", gamma), ("psi", psi), ("epsilon", epsilon)):
+            for name, val in angles.items():
                 a = np.asarray(val, dtype=np.float64)
                 if a.shape != () or not np.isfinite(a):
                     raise ValueError(
@@ -63,8 +82,8 @@ class Mount(eqx.Module):
                     )
         dtype = _dtype_of(location)
         self.location, self.location_lo = split(location, dtype)
-        self.beta, self.gamma, self.psi, self.epsilon = (
-            jnp.asarray(a, dtype=_dtype_of(a)) for a in (beta, gamma, psi, epsilon)
+        self.beta, self.gamma, self.psi, self.epsilon, self.pitch, self.roll = (
+            jnp.asarray(a, dtype=_dtype_of(a)) for a in angles.values()
         )
 
 

@@ -456,8 +456,7 @@ class ResponseTable(eqx.Module):
                 # the beam points in float64 from the mounts (`Simulation.points` are rounded
                 # to the working dtype: a 0.03-0.5 m grid at UTM coordinates in float32), made
                 # relative to each field's origin before rounding
-                h64 = np.asarray(stacked.heights, np.float64)  # (s, h)
-                ranges = h64[:, :, None] / dirs[:, None, :, 2]  # (s, h, b)
+                ranges = np.asarray(stacked.ranges, np.float64)  # (s, h, b), tilt-independent
                 vel = []
                 for i, f in enumerate(fields):
                     m = mounts[i]

@@ -79,6 +79,15 @@ class Scan(eqx.Module):
     - `cone_angle`: angle of the tilted beams from the vertical in degrees, in ``(0, 90)``.
     - `vertical`: whether a vertical beam follows the tilted beams (static).
     - `method`: the reconstruction, one of `METHODS` (static).
+    - `tilt_compensation`: whether the instrument knows its tilt (static, default False; see
+      `lidarjax.Mount` for pitch and roll). Uncompensated, the reconstruction uses the
+      body-frame beam directions (the instrument believes it is level), so a tilted
+      instrument reports its body-frame vector. Compensated, it uses the true level-frame
+      directions ``T n_b``: every method is a left inverse ``M`` of the body beam matrix
+      ``N`` (``M N = I``), and with the true directions ``N T^T`` the same method's left
+      inverse is ``T M``, so the compensated vector is ``T`` times the body-frame one
+      (for ``"least_squares"`` and ``"sine_fit"`` this is exactly the least-squares solution
+      with the level directions). Both agree for a level mount.
 
     Raises `ValueError` for a cone angle outside ``(0, 90)``, a method whose beam pattern
     does not match, or beams that cannot determine the 3-D wind (condition number of the
@@ -89,6 +98,7 @@ class Scan(eqx.Module):
     cone_angle: Float[Array, ""]
     vertical: bool = eqx.field(static=True)
     method: str = eqx.field(static=True)
+    tilt_compensation: bool = eqx.field(static=True)
 
     def __init__(
         self,
@@ -97,11 +107,17 @@ class Scan(eqx.Module):
         *,
         vertical: bool = False,
         method: str = "least_squares",
+        tilt_compensation: bool = False,
     ):
         if method not in METHODS:
             raise ValueError(f"Scan: unknown method {method!r}; choose one of {METHODS}.")
+        if not isinstance(tilt_compensation, bool | np.bool_):
+            raise ValueError(
+                f"Scan: `tilt_compensation` must be True or False, got {tilt_compensation!r}."
+            )
         self.vertical = bool(vertical)
         self.method = method
+        self.tilt_compensation = bool(tilt_compensation)
         if is_concrete(azimuths, cone_angle):
             _validate(np.asarray(azimuths, dtype=np.float64), np.asarray(cone_angle, np.float64),
                       self.vertical, method)
@@ -230,26 +246,31 @@ def _limit_cone(az: np.ndarray, vertical: bool, bad: float, good: float) -> floa
     return good
 
 
-def windcube_v1(cone_angle: float = 30.0) -> Scan:
+def windcube_v1(cone_angle: float = 30.0, *, tilt_compensation: bool = False) -> Scan:
     """Windcube V1: four beams S0..S3 at azimuths 0, 90, 180, 270 degrees (clockwise from
-    lidar ``+y``), cone angle in degrees (30 for the V1), the seed's DBS reconstruction."""
-    return Scan([0.0, 90.0, 180.0, 270.0], cone_angle, vertical=False, method="windcube_v1")
+    lidar ``+y``), cone angle in degrees (30 for the V1), the seed's DBS reconstruction.
+    `tilt_compensation`: see `Scan`."""
+    return Scan([0.0, 90.0, 180.0, 270.0], cone_angle, vertical=False, method="windcube_v1",
+                tilt_compensation=tilt_compensation)
 
 
-def windcube_v2(cone_angle: float = 28.0) -> Scan:
+def windcube_v2(cone_angle: float = 28.0, *, tilt_compensation: bool = False) -> Scan:
     """Windcube V2: four tilted beams at 0, 90, 180, 270 degrees plus a vertical beam (last);
-    ``w`` from the vertical beam. Cone angle in degrees (28 for the V2)."""
-    return Scan([0.0, 90.0, 180.0, 270.0], cone_angle, vertical=True, method="windcube_v2")
+    ``w`` from the vertical beam. Cone angle in degrees (28 for the V2).
+    `tilt_compensation`: see `Scan`."""
+    return Scan([0.0, 90.0, 180.0, 270.0], cone_angle, vertical=True, method="windcube_v2",
+                tilt_compensation=tilt_compensation)
 
 
-def zephir(cone_angle: float = 30.0, n_los: int = 50) -> Scan:
+def zephir(cone_angle: float = 30.0, n_los: int = 50, *, tilt_compensation: bool = False) -> Scan:
     """ZephIR conical scan: `n_los` evenly spaced azimuths from 0 degrees, cone angle in
     degrees (30), reconstructed by the sine fit of seed 003. The real instrument cannot tell
     the sign of a LOS (a CW lidar measures ``|s|``) and resolves direction with a vane;
-    lidarjax simulates signed LOS."""
+    lidarjax simulates signed LOS. `tilt_compensation`: see `Scan`."""
     if int(n_los) < 3:
         raise ValueError(f"zephir: n_los must be at least 3, got {n_los}.")
-    return Scan(np.arange(int(n_los)) * (360.0 / int(n_los)), cone_angle, method="sine_fit")
+    return Scan(np.arange(int(n_los)) * (360.0 / int(n_los)), cone_angle, method="sine_fit",
+                tilt_compensation=tilt_compensation)
 
 
 def _dbs_horizontal(scan: Scan, los):
@@ -274,8 +295,9 @@ def reconstruct(scan: Scan, los: Float[Array, "... b"]) -> Float[Array, "... 3"]
     - `los`: ``(..., b)`` LOS velocities in m/s, positive away from the lidar, beams ordered
       as `Scan.directions`.
 
-    **Returns:** ``(..., 3)`` reconstructed vector in the lidar frame (before the software
-    north rotation).
+    **Returns:** ``(..., 3)`` reconstructed vector in the body frame (the lidar frame of a
+    level mount), before the software north rotation. A tilt-compensating instrument
+    reports ``T`` times this (see `Scan`; `lidarjax.simulate` applies it).
     """
     los = jnp.asarray(los)
     if los.shape[-1] != scan.n_beams:
