@@ -55,11 +55,12 @@ def seed_columns(sim: Simulation) -> dict[str, np.ndarray]:
     return {k: np.asarray(v, dtype=np.float64) for k, v in cols.items()}
 
 
-def settings_mounts(settings: Settings, betas: Sequence[float]) -> list[Mount]:
+def settings_mounts(settings: Settings, betas: Sequence[float], *, pitch: float = 0.0,
+                    roll: float = 0.0) -> list[Mount]:
     """The `Mount` of each platform rotation: the settings' location row for that beta and
-    its gamma, psi and epsilon."""
+    its gamma, psi and epsilon, with the installation's `pitch` and `roll` (degrees)."""
     return [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
-                  epsilon=settings.epsilon) for b in betas]
+                  epsilon=settings.epsilon, pitch=pitch, roll=roll) for b in betas]
 
 
 def simulate_settings(
@@ -70,6 +71,8 @@ def simulate_settings(
     *,
     u_ref=SEED_U_REF,
     probe=None,
+    pitch: float = 0.0,
+    roll: float = 0.0,
 ) -> dict[float, Simulation]:
     """Simulate the lidar of `settings` for each platform rotation in `betas`.
 
@@ -82,12 +85,13 @@ def simulate_settings(
     - `scan`: the `lidarjax.Scan`.
     - `u_ref`: free-stream vector in the CFD frame (m/s); default the seed UDF's.
     - `probe`: probe volume (default point).
+    - `pitch`, `roll`: the installation's tilt in degrees (`lidarjax.Mount`), default level.
 
     **Returns:** ``{beta: Simulation}``. Runs on one grid are simulated in one compiled,
     vmapped batch; otherwise one call per run (one compilation per distinct grid shape).
     """
     betas = [float(b) for b in betas]
-    mounts = settings_mounts(settings, betas)
+    mounts = settings_mounts(settings, betas, pitch=pitch, roll=roll)
     heights = jnp.asarray(settings.heights())
     fields = [field_for_beta(b) for b in betas]
     try:
@@ -109,6 +113,8 @@ def build_table(
     *,
     u_ref=SEED_U_REF,
     probe=None,
+    pitch: float = 0.0,
+    roll: float = 0.0,
 ):
     """A `lidarjax.ResponseTable` from the CFD runs of a seed settings file.
 
@@ -117,7 +123,8 @@ def build_table(
     """
     from .response import ResponseTable
 
-    sims = simulate_settings(settings, betas, field_for_beta, scan, u_ref=u_ref, probe=probe)
-    table = ResponseTable.from_simulations(list(sims.values()),
-                                           mount=settings_mounts(settings, list(sims)))
+    sims = simulate_settings(settings, betas, field_for_beta, scan, u_ref=u_ref, probe=probe,
+                             pitch=pitch, roll=roll)
+    table = ResponseTable.from_simulations(
+        list(sims.values()), mount=settings_mounts(settings, list(sims), pitch=pitch, roll=roll))
     return table, sims

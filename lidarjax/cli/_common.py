@@ -125,6 +125,14 @@ def positive_int(text: str) -> int:
     return value
 
 
+def tilt_angle(text: str) -> float:
+    """argparse type: a finite angle in [-90, 90] degrees."""
+    value = finite_float(text)
+    if not -90.0 <= value <= 90.0:
+        raise argparse.ArgumentTypeError(f"expected an angle in [-90, 90] degrees, got {text!r}")
+    return value
+
+
 def height_list(text: str) -> tuple[float, ...]:
     """argparse type: comma-separated heights in metres, finite, positive, increasing."""
     try:
@@ -233,6 +241,14 @@ def add_run_arguments(parser, *, default_scan: str) -> None:
     parser.add_argument("--scan", choices=SCAN_CHOICES, default=default_scan)
     parser.add_argument("--cone-angle", type=positive_float, default=None,
                         help="cone angle in degrees (default: the scan's, 30 / 28 / 30)")
+    parser.add_argument("--pitch", type=tilt_angle, default=0.0,
+                        help="installation pitch in degrees (lidarjax.Mount; positive raises the "
+                             "S0 side; -90 is a forward-looking nacelle lidar). Default level")
+    parser.add_argument("--roll", type=tilt_angle, default=0.0,
+                        help="installation roll in degrees (positive lowers the S1 side)")
+    parser.add_argument("--tilt-compensation", action="store_true",
+                        help="the instrument knows its tilt and reconstructs with the level "
+                             "beam directions (default: it believes it is level)")
     parser.add_argument("--u-ref", type=vector, default=(-15.0, 0.0, 0.0),
                         help="free stream u,v,w in the CFD frame, m/s (default: the seed "
                              "UDF's -15,0,0)")
@@ -286,11 +302,13 @@ def vector(text: str) -> tuple[float, float, float]:
     return values
 
 
-def make_scan(name: str, cone: float | None):
+def make_scan(name: str, cone: float | None, *, tilt_compensation: bool = False):
     from .. import scan as scans
 
     make = getattr(scans, name)
-    return make() if cone is None else make(cone)
+    if cone is None:
+        return make(tilt_compensation=tilt_compensation)
+    return make(cone, tilt_compensation=tilt_compensation)
 
 
 def selected_betas(args, settings) -> list[float]:

@@ -85,7 +85,7 @@ def run(args) -> int:
     for b in betas:
         settings.location(b)  # raises a ValueError naming the missing row
     paths = field_paths(args, betas)
-    scan = make_scan(args.scan, args.cone_angle)
+    scan = make_scan(args.scan, args.cone_angle, tilt_compensation=args.tilt_compensation)
     probe = make_probe(args)
     nc = have_module("xarray")
     names = []
@@ -102,7 +102,8 @@ def run(args) -> int:
         fields[b] = load_field(paths[b])
         return fields[b]
 
-    sims = simulate_settings(settings, betas, field_for, scan, u_ref=args.u_ref, probe=probe)
+    sims = simulate_settings(settings, betas, field_for, scan, u_ref=args.u_ref, probe=probe,
+                             pitch=args.pitch, roll=args.roll)
     out.mkdir(parents=True, exist_ok=True)
     flag_doc = ", ".join(f"{int(f)} {f.name.lower()}" for f in Flag if f)
     print(f"{'beta':>7s} {'file':<40s} {'U_lidar(top)':>13s} {'cff_U range':>18s}")
@@ -112,7 +113,8 @@ def run(args) -> int:
         path = write_seed_output(out, b, cols, verbose=settings.verbose, flags=flags)
         meta = {"settings": str(args.settings), "field": str(paths[b]), "scan": args.scan,
                 "beta_deg": b, "gamma_deg": settings.gamma, "psi_deg": settings.psi,
-                "epsilon_deg": settings.epsilon, "u_ref_cfd_m_s": ",".join(map(str, args.u_ref)),
+                "epsilon_deg": settings.epsilon, "pitch_deg": args.pitch,
+                "roll_deg": args.roll, "u_ref_cfd_m_s": ",".join(map(str, args.u_ref)),
                 "directions": "Th_lidar/th_point: seed azimuth = (-atan2(v,u)) mod 360; "
                               "meteorological = (seed + 270) mod 360",
                 "flags": f"lidarjax.Flag bits per height: {flag_doc}"}

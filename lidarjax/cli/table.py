@@ -66,8 +66,8 @@ def table_metadata(args, settings, scan, paths, heights) -> dict:
         "probe": args.probe, "probe_nodes": args.probe_nodes,
         "probe_scale": 1.0 if args.probe_scale is None else args.probe_scale,
         "gamma_deg": settings.gamma, "psi_deg": settings.psi, "epsilon_deg": settings.epsilon,
-        "pitch_deg": float(getattr(settings, "pitch", 0.0)),
-        "roll_deg": float(getattr(settings, "roll", 0.0)),
+        "pitch_deg": float(args.pitch), "roll_deg": float(args.roll),
+        "tilt_compensation": bool(args.tilt_compensation),
         "heights_m": [float(h) for h in heights],
         "settings": os.path.abspath(args.settings), "field": args.field,
         "cfd_files": {f"{b:g}": os.path.abspath(p) for b, p in paths.items()},
@@ -89,7 +89,7 @@ def run(args) -> int:
     settings = read_settings(args.settings)
     betas = [float(b) for b in settings.betas]
     paths = field_paths(args, betas)
-    scan = make_scan(args.scan, args.cone_angle)
+    scan = make_scan(args.scan, args.cone_angle, tilt_compensation=args.tilt_compensation)
     probe = make_probe(args)
     inputs = [("settings", args.settings)] + [(f"--field (beta {b:g})", p)
                                                for b, p in paths.items()]
@@ -112,7 +112,7 @@ def run(args) -> int:
     print(f"simulating {len(betas)} CFD runs x {settings.nh} heights ({args.scan}, "
           f"{args.probe} probe) ...", file=sys.stderr)
     table, _ = build_table(settings, betas, fields.__getitem__, scan, u_ref=args.u_ref,
-                           probe=probe)
+                           probe=probe, pitch=args.pitch, roll=args.roll)
     save_table(out, table, meta)
     bad = np.isnan(np.asarray(table.response)).all(axis=0)
     note = ""
