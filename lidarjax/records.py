@@ -343,11 +343,14 @@ def check_instrument(metadata: dict, table, records: RecordSet, *,
             out.append(f"direction offset: table epsilon {float(eps):g} deg (beam 0 points "
                        f"there, clockwise from north), record header DirectionOffset="
                        f"{records.direction_offset:g} deg")
+    # tilt: compared in magnitude (the instruments' sign conventions for PitchAngle and
+    # RollAngle are not stated in the files), with the same tolerance
     for name, key in (("pitch", "pitch_deg"), ("roll", "roll_deg")):
         tv, rv = metadata.get(key), getattr(records, name)
-        if isinstance(tv, (int, float)) and math.isfinite(rv) and abs(float(tv) - rv) > \
-                angle_tolerance:
-            out.append(f"{name}: table {float(tv):g} deg, record header {rv:g} deg")
+        if isinstance(tv, (int, float)) and math.isfinite(rv) and \
+                abs(abs(float(tv)) - abs(rv)) > angle_tolerance:
+            out.append(f"{name}: table {float(tv):g} deg, record header {rv:g} deg "
+                       "(build the table with --pitch/--roll)")
     return out
 
 
@@ -751,63 +754,82 @@ def write_corrected_csv(path, corrected: CorrectedRecords, metadata: dict | None
 
 
 def write_corrected_netcdf(path, corrected: CorrectedRecords, metadata: dict | None = None):
-    """Write corrected records as a CF-conventions NetCDF file (needs xarray), atomically.
+    """Write corrected records as a CF-1.8 NetCDF file (classic format), atomically.
 
-    Dimensions ``time`` (end of interval, UTC) and ``height`` (m); variables with `units`,
-    `long_name` and `standard_name` where CF has one (`wind_speed`, `wind_from_direction`);
-    `flags` with CF `flag_masks` / `flag_meanings`.
+    Written with `scipy.io.netcdf_file` (a core dependency: no xarray needed, and no second
+    of importing it); any NetCDF reader opens it (xarray, netCDF4, ncdump). Dimensions
+    ``time`` (end of interval, UTC, seconds since 1970-01-01) and ``height`` (m); every
+    variable has `units` and `long_name`, `standard_name` where CF has one (`wind_speed`,
+    `wind_from_direction`), `_FillValue` NaN; `flags` carries CF `flag_masks` and
+    `flag_meanings` (`InverseFlag` and `RecordFlag` bits), `converged` `flag_values`.
     """
+    from scipy.io import netcdf_file
+
     from .inverse import InverseFlag
-    from .io._common import atomic_path, import_optional, netcdf_engine
+    from .io._common import atomic_path
 
-    xr = import_optional("xarray", "netcdf", "write_corrected_netcdf")
     c = corrected
-    dims = ("time", "height")
-    masks = [int(f) for f in InverseFlag if f] + [int(f) for f in RecordFlag if f]
-    meanings = [f.name.lower() for f in InverseFlag if f] + [f.name.lower() for f in RecordFlag
-                                                             if f]
-
-    def var(a, units, long_name, standard_name=None, **extra):
-        attrs = {"units": units, "long_name": long_name, **extra}
-        if standard_name:
-            attrs["standard_name"] = standard_name
-        return (dims, np.asarray(a), attrs)
-
-    data = {
-        "speed": var(c.speed, "m s-1", "free-stream horizontal wind speed", "wind_speed"),
-        "direction": var(c.direction, "degree", "free-stream wind direction (from, clockwise "
-                         "from north)", "wind_from_direction"),
-        "speed_std": var(c.speed_std, "m s-1", "one-sigma uncertainty of speed"),
-        "direction_std": var(c.direction_std, "degree", "one-sigma uncertainty of direction"),
-        "converged": (dims, np.asarray(c.converged).astype(np.int8),
-                      {"long_name": "inversion converged", "flag_values": np.array([0, 1], np.int8),
-                       "flag_meanings": "false true"}),
-        "flags": (dims, np.asarray(c.flags).astype(np.int32),
-                  {"long_name": "quality flags", "flag_masks": np.array(masks, np.int32),
-                   "flag_meanings": " ".join(meanings)}),
-        "measured_speed": var(c.measured_speed, "m s-1", "horizontal wind speed reported by "
-                              "the instrument", "wind_speed"),
-        "measured_direction": var(c.measured_direction, "degree", "wind direction reported "
-                                  "by the instrument", "wind_from_direction"),
-    }
-    if c.availability is not None:
-        data["availability"] = var(c.availability, "percent", "data availability")
-    if c.noise is not None:
-        data["noise"] = var(c.noise, "m s-1", "noise level used for the uncertainty")
-    ds = xr.Dataset(
-        data_vars=data,
-        coords={"time": ("time", np.asarray(c.time).astype("datetime64[ns]"),
-                         {"long_name": "end of the averaging interval", "standard_name": "time"}),
-                "height": ("height", np.asarray(c.heights), {"units": "m", "long_name":
-                           "height above the lidar", "positive": "up"})},
-        attrs={"Conventions": "CF-1.8", "title": "lidarjax corrected lidar records",
-               **{str(k): str(v) for k, v in (metadata or {}).items()}},
-    )
+    n, h = np.shape(c.speed)
+    flags = [f for f in InverseFlag if f] + [f for f in RecordFlag if f]
     target = Path(path)
     with atomic_path(target) as tmp:
-        ds.to_netcdf(os.fspath(tmp), engine=netcdf_engine(),
-                     encoding={"time": {"units": "seconds since 1970-01-01 00:00:00",
-                                        "dtype": "float64"}})
+        nc = netcdf_file(os.fspath(tmp), "w", version=2)
+        try:
+            nc.Conventions = "CF-1.8"
+            nc.title = "lidarjax corrected lidar records"
+            nc.history = "lidarjax correct"
+            for k, v in (metadata or {}).items():
+                setattr(nc, str(k).replace(" ", "_"), str(v))
+            nc.createDimension("time", n)
+            nc.createDimension("height", h)
+            t = nc.createVariable("time", "f8", ("time",))
+            t[:] = np.asarray(c.time).astype("datetime64[s]").astype(np.int64).astype(np.float64)
+            t.units = "seconds since 1970-01-01 00:00:00"
+            t.calendar = "standard"
+            t.standard_name = "time"
+            t.long_name = "end of the averaging interval (UTC)"
+            z = nc.createVariable("height", "f8", ("height",))
+            z[:] = np.asarray(c.heights, np.float64)
+            z.units = "m"
+            z.positive = "up"
+            z.long_name = "height above the lidar"
+
+            def var(name, values, units, long_name, standard_name=None):
+                v = nc.createVariable(name, "f4", ("time", "height"))
+                v._FillValue = np.float32(np.nan)
+                v[:] = np.asarray(values, np.float32)
+                v.units = units
+                v.long_name = long_name
+                if standard_name:
+                    v.standard_name = standard_name
+
+            var("speed", c.speed, "m s-1", "free-stream horizontal wind speed", "wind_speed")
+            var("direction", c.direction, "degree", "free-stream wind direction (from, "
+                "clockwise from north)", "wind_from_direction")
+            var("speed_std", c.speed_std, "m s-1", "one-sigma uncertainty of speed")
+            var("direction_std", c.direction_std, "degree", "one-sigma uncertainty of direction")
+            var("measured_speed", c.measured_speed, "m s-1", "horizontal wind speed reported by "
+                "the instrument", "wind_speed")
+            var("measured_direction", c.measured_direction, "degree", "wind direction reported "
+                "by the instrument", "wind_from_direction")
+            if c.availability is not None:
+                var("availability", c.availability, "percent", "data availability")
+            if c.noise is not None:
+                var("noise", c.noise, "m s-1", "noise level used for the uncertainty (along "
+                    "the wind)")
+            cv = nc.createVariable("converged", "i1", ("time", "height"))
+            cv[:] = np.asarray(c.converged).astype(np.int8)
+            cv.long_name = "inversion converged"
+            cv.flag_values = np.array([0, 1], np.int8)
+            cv.flag_meanings = "false true"
+            fl = nc.createVariable("flags", "i4", ("time", "height"))
+            fl[:] = np.asarray(c.flags).astype(np.int32)
+            fl.long_name = "quality flags (bitwise OR)"
+            fl.flag_masks = np.array([int(f) for f in flags], np.int32)
+            fl.flag_meanings = " ".join(f.name.lower() for f in flags)
+            nc.flush()
+        finally:
+            nc.close()
     return target
 
 

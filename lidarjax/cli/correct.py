@@ -10,8 +10,8 @@ def register(sub) -> None:
         "correct", help="invert lidar records for the free-stream wind with a response table",
         description="Read Windcube .sta/.rtd or ZephIR .csv records, check the instrument "
                     "against the table, invert every record and height the table has, and "
-                    "write corrected speed, direction, uncertainty and flags as CSV (plus "
-                    "CF NetCDF when xarray is installed), written atomically. Bad records "
+                    "write corrected speed, direction, uncertainty and flags as CSV and CF "
+                    "NetCDF, written atomically. Bad records "
                     "come back NaN with a reason in the flags column.",
         epilog="example: lidarjax correct --table site_table.npz --records "
                "wls7_2020_10_07.sta --out corrected.csv")
@@ -19,8 +19,8 @@ def register(sub) -> None:
     cor.add_argument("--records", required=True, help=".sta, .stdsta, .rtd or ZephIR .csv")
     cor.add_argument("--out", default=None, help="output CSV (default: <records>_corrected.csv); "
                      "an existing file is replaced atomically, an input never")
-    cor.add_argument("--netcdf", default=None, help="NetCDF output (default: the CSV's name "
-                     "with .nc, when xarray is installed)")
+    cor.add_argument("--netcdf", default=None, help="CF NetCDF output (default: the CSV's name "
+                     "with .nc)")
     cor.add_argument("--no-netcdf", action="store_true", help="write the CSV only")
     cor.add_argument("--noise", type=positive_float, default=None,
                      help="noise standard deviation (m/s) for the uncertainties (default: "
@@ -48,7 +48,6 @@ def run(args) -> int:
     from pathlib import Path
 
     from ..io import load_table
-    from ..io._common import have_module
     from ..records import (
         DEFAULT_MIN_AVAILABILITY,
         check_instrument,
@@ -76,7 +75,7 @@ def run(args) -> int:
     out = Path(args.out) if args.out else records.with_name(records.stem + "_corrected.csv")
     check_output_file(out, inputs=inputs)
     nc = None
-    if not args.no_netcdf and (args.netcdf is not None or have_module("xarray")):
+    if not args.no_netcdf:
         nc = Path(args.netcdf) if args.netcdf else out.with_suffix(".nc")
         if nc.resolve() == out.resolve():
             raise ValueError(f"--netcdf {nc} is the same file as the CSV output; name it .nc")
