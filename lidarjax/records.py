@@ -140,12 +140,25 @@ def _attr(rec, *names, default=math.nan):
     return default
 
 
-def _float_attr(rec, *names) -> float:
+def _float_attr(rec, *names, header=()) -> float:
+    """A numeric record attribute, else the first of the `header` keys (normalised match),
+    else NaN."""
     v = _attr(rec, *names)
     try:
-        return float(v)
+        v = float(v)
     except (TypeError, ValueError):
-        return math.nan
+        v = math.nan
+    if math.isnan(v) and header and isinstance(getattr(rec, "header", None), dict):
+        from .io._common import normalise_key
+
+        wanted = {normalise_key(k) for k in header}
+        for key, text in rec.header.items():
+            if normalise_key(key) in wanted:
+                try:
+                    return float(str(text).strip())
+                except ValueError:
+                    return math.nan
+    return v
 
 
 def _row_flags(rec, shape) -> np.ndarray:
@@ -246,8 +259,8 @@ def load_records(path, *, cnr_threshold: float | None = None, period: str = "10m
             direction_std=direction_std, availability=availability, n_samples=n_samples,
             scan_angle=_float_attr(rec, "scan_angle"),
             direction_offset=_float_attr(rec, "direction_offset"),
-            pitch=_float_attr(rec, "pitch", "pitch_angle"),
-            roll=_float_attr(rec, "roll", "roll_angle"),
+            pitch=_float_attr(rec, "pitch", "pitch_angle", header=("PitchAngle",)),
+            roll=_float_attr(rec, "roll", "roll_angle", header=("RollAngle",)),
             period_s=_period_seconds(rec, np.asarray(rec.time, "datetime64[s]")),
             warnings=tuple(getattr(rec, "warnings", ()) or ()),
         )
@@ -255,7 +268,7 @@ def load_records(path, *, cnr_threshold: float | None = None, period: str = "10m
         rec = read_rtd(p)
         # the instrument's CNR filter: --cnr-threshold, else the header's CNRThreshold
         threshold = float(cnr_threshold) if cnr_threshold is not None else _float_attr(
-            rec, "cnr_threshold")
+            rec, "cnr_threshold", header=("CNRThreshold",))
         kwargs = {"min_cnr": threshold} if math.isfinite(threshold) else {}
         beams = group_rtd(rec, period, **kwargs)
         los = np.array(beams.los, np.float64)
@@ -279,9 +292,9 @@ def load_records(path, *, cnr_threshold: float | None = None, period: str = "10m
             flags=flags, los=los, availability=a,
             scan_angle=_float_attr(rec, "scan_angle"),
             direction_offset=_float_attr(rec, "direction_offset"),
-            pitch=_float_attr(rec, "pitch", "pitch_angle"),
-            roll=_float_attr(rec, "roll", "roll_angle"),
-            cnr_threshold=float(threshold),
+            pitch=_float_attr(rec, "pitch", "pitch_angle", header=("PitchAngle",)),
+            roll=_float_attr(rec, "roll", "roll_angle", header=("RollAngle",)),
+            cnr_threshold=threshold,
             period_s=float(beams.period / np.timedelta64(1, "s")),
             warnings=tuple(getattr(rec, "warnings", ()) or ()),
         )
