@@ -508,6 +508,26 @@ def _progress(label: str, enabled: bool):
     return show
 
 
+def _homogeneous(los, vectors):
+    """The homogeneous-flow reconstruction ``(r, h, 3)`` from the finite beams of each
+    record (least squares over the beams present; NaN when they cannot fix all three
+    components). `vectors` ``(b, 3)`` in the north frame, or None."""
+    if vectors is None:
+        return np.full(los.shape[:-1] + (3,), np.nan)
+    n = np.asarray(vectors, np.float64)
+    ok = np.isfinite(los)
+    w = ok.astype(np.float64)
+    y = np.where(ok, los, 0.0)
+    a = np.einsum("...b,bi,bj->...ij", w, n, n)
+    rhs = np.einsum("...b,bi->...i", w * y, n)
+    eig = np.linalg.eigvalsh(a)
+    good = eig[..., 0] > 1e-6 * np.maximum(eig[..., -1], 1e-300)
+    a = np.where(good[..., None, None], a, np.eye(3))
+    v = np.linalg.solve(a, rhs[..., None])[..., 0]
+    v[~good] = np.nan
+    return v
+
+
 def correct_records(
     table,
     path,
@@ -564,11 +584,7 @@ def correct_records(
         los = rec.los[:, ri, : sub.n_beams]
         data = (los,)
         vectors = np.asarray(sub.beam_vectors) if sub.beam_vectors is not None else None
-        if vectors is not None:
-            homog = np.einsum("kb,rhb->rhk", np.linalg.pinv(vectors), np.nan_to_num(los))
-            homog[np.isnan(los).any(-1)] = np.nan
-        else:
-            homog = np.full(los.shape[:-1] + (3,), np.nan)
+        homog = _homogeneous(los, vectors)
         measured = (np.asarray(horizontal_speed(homog)), np.asarray(wind_direction(homog)))
         noise_arr = None if noise is None else np.full((n, h), float(noise))
     else:
@@ -867,9 +883,11 @@ def quality_summary(c: CorrectedRecords) -> list[str]:
             counts.append(f"{flag.name.lower()} {k}")
     lines.append("flags: " + (", ".join(counts) if counts else "none"))
     if c.converged.any():
-        du = np.nanmedian(np.abs(c.speed - c.measured_speed)[c.converged])
+        du = np.abs(c.speed - c.measured_speed)[c.converged]
         std = c.speed_std[c.converged]
+        du_text = (f"median |correction| {np.nanmedian(du):.3f} m/s" if np.isfinite(du).any()
+                   else "no reported speed to compare")
         std_text = (f"median speed_std {np.nanmedian(std):.3f} m/s" if np.isfinite(std).any()
                     else "no uncertainty (no dispersion in the file; give --noise)")
-        lines.append(f"median |correction| {du:.3f} m/s; {std_text}")
+        lines.append(f"{du_text}; {std_text}")
     return lines
