@@ -631,3 +631,15 @@ def test_compilation_cache_folder_and_opt_out(monkeypatch, tmp_path):
         assert jax.config.jax_compilation_cache_dir == str(folder)
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
+
+
+def test_old_table_without_metadata_warns_and_corrects(case, capsys, tmp_path):
+    table = lj.io.load_table(case["table"])
+    old = tmp_path / "old_table.npz"
+    save_table(old, table, {"scan": "windcube_v2"})  # as written before the instrument facts
+    out = tmp_path / "old_out.csv"
+    rc, text, err = run_cli(["correct", "--table", old, "--records", case["root"] / "good.sta",
+                             "--out", out, "--quiet", "--no-netcdf"], capsys)
+    assert rc == 0 and "converged 18 of 18" in text
+    warn = [ln for ln in err.splitlines() if "cannot be checked" in ln]
+    assert len(warn) == 1 and "cone_angle_deg" in warn[0]
