@@ -6,8 +6,8 @@ Private to `lidarjax.io`; nothing here is public API.
 from __future__ import annotations
 
 import contextlib
-import enum
 import datetime as _dt
+import enum
 import importlib
 import math
 import os
@@ -259,7 +259,7 @@ def parse_times(texts: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     iso = [_to_iso(t) for t in texts]
     ok = np.array([bool(_ISO_TIME.match(t)) for t in iso], dtype=bool)
     out = np.full(len(iso), np.datetime64("NaT"), dtype="datetime64[ms]")
-    good = [t for t, g in zip(iso, ok) if g]
+    good = [t for t, g in zip(iso, ok, strict=True) if g]
     if good:
         try:
             out[ok] = np.array(good, dtype="datetime64[ms]")

@@ -140,10 +140,11 @@ class RtdRecord:
                 raise ValueError(f"{name} must have shape (t, k) = ({t}, {k})")
 
     def to_beams(
-        self, period: str | np.timedelta64 = "10min", *, min_cnr: float | None = None
+        self, period: str | np.timedelta64 = "10min", *, min_cnr: float | None = None,
+        **kwargs: Any,
     ) -> RtdBeams:
-        """Per-interval mean line-of-sight speed per beam; see `group_rtd`."""
-        return group_rtd(self, period=period, min_cnr=min_cnr)
+        """Per-interval mean line-of-sight speed per beam; see `group_rtd` (same keywords)."""
+        return group_rtd(self, period=period, min_cnr=min_cnr, **kwargs)
 
     def to_pandas(self) -> Any:
         """A **long** `pandas.DataFrame`: one row per (line of sight, altitude).
