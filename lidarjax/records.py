@@ -8,11 +8,13 @@ compiled shape), and `write_corrected_csv` / `write_corrected_netcdf` write the 
 
 ## Flags
 
-`CorrectedRecords.flags` holds the `lidarjax.InverseFlag` bits of the inversion (bits 0-4)
-OR-ed with the `RecordFlag` bits of the record itself (bits 8 and up): a record that the
-file could not give (a corrupt row, a value out of its physical range, too little data) is
-NaN with its reason, never dropped and never reinterpreted (a negative reported speed is not
-turned into a positive one from the opposite direction).
+Two bit masks per record and height. `CorrectedRecords.flags` holds the
+`lidarjax.InverseFlag` bits of the inversion; `CorrectedRecords.record_flags` the
+`RecordFlag` bits the reader found in the file (corrupt row, low availability, impossible
+value, below the CNR threshold, partial interval, duplicate time, high CNR; see
+`lidarjax.io._common.RecordFlag`). A record the file could not give is NaN with its reason,
+never dropped and never reinterpreted (a negative reported speed is not turned into a
+positive one from the opposite direction).
 
 ## Uncertainty of reported (``.sta``, ZephIR) records
 
@@ -45,35 +47,20 @@ the truth 93-97 % of the time): tests/test_records_uncertainty.py.
 from __future__ import annotations
 
 import dataclasses
-import enum
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
+
+from .io._common import BLOCKING_FLAGS, MIN_AVAILABILITY, RecordFlag
 
 __all__ = ["RecordFlag", "RecordSet", "CorrectedRecords", "load_records", "check_instrument",
            "match_heights", "reported_noise", "correct_records", "write_corrected_csv",
            "write_corrected_netcdf", "quality_summary", "SCAN_PERIOD_S",
            "DEFAULT_MIN_AVAILABILITY"]
-
-
-class RecordFlag(enum.IntFlag):
-    """Why a record is NaN before any inversion (bits 8 and up, beside `InverseFlag`)."""
-
-    OK = 0
-    #: The file's row could not be read (cut short, bad time stamp, non-numeric cell).
-    CORRUPT_ROW = 256
-    #: The record's data availability is below the minimum (`--min-availability`).
-    LOW_AVAILABILITY = 512
-    #: A value outside its physical range: negative speed, direction outside [0, 360],
-    #: CNR above 0 dB. The record is NaN; the value is never reinterpreted.
-    IMPOSSIBLE_VALUE = 1024
-    #: The interval is only partly covered by the file (first or last of a raw file).
-    PARTIAL_INTERVAL = 2048
-    #: The record has no value at this height (NaN in the file).
-    MISSING = 4096
 
 
 #: Seconds per full scan, by instrument kind, for the standard error of reported records:
@@ -82,8 +69,9 @@ class RecordFlag(enum.IntFlag):
 #: cycle on average).
 SCAN_PERIOD_S = {"windcube_v2": 5.0, "windcube_v1": 6.0, "zephir": 3.0}
 
-#: Records whose data availability is below this (percent) are flagged LOW_AVAILABILITY.
-DEFAULT_MIN_AVAILABILITY = 50.0
+#: Records whose data availability is below this (percent) are flagged LOW_AVAILABILITY and
+#: not used: the readers' `MIN_AVAILABILITY` (80 %, wind-resource practice).
+DEFAULT_MIN_AVAILABILITY = MIN_AVAILABILITY
 
 #: Heights closer than this (m) are the same height.
 HEIGHT_TOLERANCE_M = 0.5
@@ -161,19 +149,21 @@ def _float_attr(rec, *names, header=()) -> float:
     return v
 
 
-def _row_flags(rec, shape) -> np.ndarray:
-    """The reader's per-row or per-record flags, as `RecordFlag` bits ``(r, k)``."""
-    flags = np.zeros(shape, np.int64)
-    bad = _attr(rec, "corrupt", "bad_rows", "row_corrupt", default=None)
-    if bad is not None:
-        b = np.asarray(bad, bool)
-        flags |= np.where(b.reshape(b.shape + (1,) * (2 - b.ndim)), int(RecordFlag.CORRUPT_ROW), 0)
-    partial = _attr(rec, "partial", "partial_interval", default=None)
+def _reader_flags(rec, shape) -> np.ndarray:
+    """The reader's `RecordFlag` bits as ``(r, k)`` (a ``.rtd``'s per-beam bits OR-ed)."""
+    flags = getattr(rec, "flags", None)
+    if flags is None:
+        out = np.zeros(shape, np.int64)
+    else:
+        f = np.asarray(flags).astype(np.int64)
+        if f.ndim == 3:
+            f = np.bitwise_or.reduce(f, axis=-1)
+        out = np.broadcast_to(f.reshape(f.shape + (1,) * (len(shape) - f.ndim)), shape).copy()
+    partial = getattr(rec, "partial", None)
     if partial is not None:
-        p = np.asarray(partial, bool)
-        flags |= np.where(p.reshape(p.shape + (1,) * (2 - p.ndim)),
-                          int(RecordFlag.PARTIAL_INTERVAL), 0)
-    return flags
+        pr = np.asarray(partial, bool).reshape(-1, *([1] * (len(shape) - 1)))
+        out |= np.where(pr, int(RecordFlag.PARTIAL_INTERVAL), 0)
+    return out
 
 
 def _extra(rec, *keys):
@@ -185,121 +175,119 @@ def _extra(rec, *keys):
 
 
 def _instrument_of(rec, kind: str) -> str:
-    text = str(_attr(rec, "instrument", "instrument_kind", default="") or "").lower()
+    text = str(getattr(rec, "instrument", "") or "").lower().replace(" ", "_").replace("-", "_")
     for key in ("windcube_v1", "windcube_v2", "zephir"):
-        if key in text.replace(" ", "_").replace("-", "_"):
+        if key in text:
             return key
-    if "zephir" in text or "zx" in text:
-        return "zephir"
-    if kind == "zephir":
+    if "zephir" in text or "zx" in text or kind == "zephir":
         return "zephir"
     version = str(getattr(rec, "version", "") or "").upper()
-    if text.startswith("v1") or version == "V1":
+    if version == "V1":
         return "windcube_v1"
-    if version.startswith("V2") or text.startswith("v2"):
+    if version.startswith("V2"):
         return "windcube_v2"
     return ""
 
 
 def load_records(path, *, cnr_threshold: float | None = None, period: str = "10min",
-                 min_availability: float = DEFAULT_MIN_AVAILABILITY) -> RecordSet:
+                 min_availability: float = DEFAULT_MIN_AVAILABILITY,
+                 progress: bool = False) -> RecordSet:
     """Read a record file (by suffix: ``.sta``/``.stdsta``, ``.rtd``/``.stdrtd``, ``.csv``).
 
-    `cnr_threshold` (dB) overrides the ``.rtd`` header's; `period` is the averaging interval
-    of raw records; records below `min_availability` percent are flagged LOW_AVAILABILITY.
-    Physically impossible values are flagged IMPOSSIBLE_VALUE and set to NaN. Raises
-    `ValueError` naming the file for an unknown format or an unreadable file.
+    `cnr_threshold` (dB) overrides the ``.rtd`` header's `CNRThreshold`; `period` is the
+    averaging interval of raw records; records below `min_availability` percent are flagged
+    LOW_AVAILABILITY and not used. The reader's warnings (corrupt rows, by file and line)
+    are collected in `RecordSet.warnings` instead of being printed. Values under a blocking
+    flag are NaN. Raises `ValueError` naming the file for an unknown format or a file that
+    cannot be read at all.
     """
     from .io import group_rtd, read_rtd, read_sta, read_zephir_csv
 
     p = Path(path)
     suffix = p.suffix.lower()
-    if suffix in (".sta", ".stdsta", ".csv"):
-        kind = "zephir" if suffix == ".csv" else "sta"
-        rec = (read_zephir_csv if kind == "zephir" else read_sta)(p)
-        speed = np.array(rec.speed, np.float64)
-        direction = np.array(rec.direction, np.float64)
-        shape = speed.shape
-        flags = _row_flags(rec, shape)
-        speed_std = getattr(rec, "speed_std", None)
-        speed_std = None if speed_std is None else np.array(speed_std, np.float64)
-        availability = getattr(rec, "availability", None)
-        availability = None if availability is None else np.array(availability, np.float64)
-        n_samples = None
-        direction_std = _extra(rec, "winddirectiondispersion", "winddirectionstd",
-                               "directiondispersion", "directionstd")
-        if kind == "zephir":
-            ti = _extra(rec, "ti", "turbulenceintensity", "horizontalti")
-            std = _extra(rec, "horizontalwindspeedstd", "windspeedstd", "horizontalwindspeedsd")
-            if std is not None:
-                speed_std = std
-            elif ti is not None:
-                speed_std = ti * (100.0 if np.nanmax(np.abs(ti), initial=0) <= 1.0 else 1.0) \
-                    * speed / 100.0
-            n_samples = _extra(rec, "packetsinaverage", "packets", "validpackets")
-            if availability is None:
-                availability = _extra(rec, "dataavailability", "availability")
-        bad = (speed < 0) | (direction < 0) | (direction > 360)
-        cnr = getattr(rec, "cnr", None)
-        if cnr is not None:
-            bad |= np.asarray(cnr, np.float64) > 0
-        flags |= np.where(bad, int(RecordFlag.IMPOSSIBLE_VALUE), 0)
-        if availability is not None:
-            low = availability < min_availability
-            flags |= np.where(low, int(RecordFlag.LOW_AVAILABILITY), 0)
-        unusable = flags != 0
-        speed[unusable] = np.nan
-        direction[unusable] = np.nan
-        missing = ~unusable & ~(np.isfinite(speed) & (np.isfinite(direction) | (speed == 0)))
-        flags |= np.where(missing, int(RecordFlag.MISSING), 0)
-        return RecordSet(
-            kind=kind, path=str(p), instrument=_instrument_of(rec, kind),
-            time=np.asarray(rec.time, "datetime64[s]"), heights=np.asarray(rec.heights, float),
-            flags=flags, speed=speed, direction=direction, speed_std=speed_std,
-            direction_std=direction_std, availability=availability, n_samples=n_samples,
-            scan_angle=_float_attr(rec, "scan_angle"),
-            direction_offset=_float_attr(rec, "direction_offset"),
-            pitch=_float_attr(rec, "pitch", "pitch_angle", header=("PitchAngle",)),
-            roll=_float_attr(rec, "roll", "roll_angle", header=("RollAngle",)),
-            period_s=_period_seconds(rec, np.asarray(rec.time, "datetime64[s]")),
-            warnings=tuple(getattr(rec, "warnings", ()) or ()),
-        )
-    if suffix in (".rtd", ".stdrtd"):
-        rec = read_rtd(p)
-        # the instrument's CNR filter: --cnr-threshold, else the header's CNRThreshold
-        threshold = float(cnr_threshold) if cnr_threshold is not None else _float_attr(
-            rec, "cnr_threshold", header=("CNRThreshold",))
-        kwargs = {"min_cnr": threshold} if math.isfinite(threshold) else {}
-        beams = group_rtd(rec, period, **kwargs)
+    if suffix not in (".sta", ".stdsta", ".csv", ".rtd", ".stdrtd"):
+        raise ValueError(f"{p}: unknown record format {suffix!r}; expected .sta, .stdsta, .rtd "
+                         "or a ZephIR .csv")
+    show = _progress(f"reading {p.name}", progress)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if suffix == ".rtd" or suffix == ".stdrtd":
+            raw = read_rtd(p, progress=show if progress else None)
+            beams = group_rtd(raw, period, cnr_threshold=("header" if cnr_threshold is None
+                                                          else float(cnr_threshold)),
+                              min_availability=min_availability)
+            rec = None
+        elif suffix == ".csv":
+            rec = read_zephir_csv(p)
+        else:
+            rec = read_sta(p, min_availability=min_availability,
+                           progress=show if progress else None)
+    notes = [str(w.message) for w in caught]
+    source = rec if rec is not None else raw
+    notes += [w for w in (getattr(source, "warnings", ()) or ()) if w not in notes]
+    facts = dict(
+        scan_angle=_float_attr(source, "scan_angle", header=("ScanAngle",)),
+        direction_offset=_float_attr(source, "direction_offset", header=("DirectionOffset",)),
+        pitch=_float_attr(source, "pitch", "pitch_angle", header=("PitchAngle",)),
+        roll=_float_attr(source, "roll", "roll_angle", header=("RollAngle",)),
+        warnings=tuple(notes),
+    )
+    if rec is None:  # raw line-of-sight records, averaged per interval and beam
         los = np.array(beams.los, np.float64)
         shape = los.shape[:2]
-        flags = _row_flags(beams, shape)
+        flags = _reader_flags(beams, shape)
         avail = getattr(beams, "availability", None)
+        a = None
         if avail is not None:
             a = np.asarray(avail, np.float64)
             if a.ndim == 3:
-                a = np.nanmin(a[..., :4], axis=-1)  # the worst tilted beam
-            a = a * (100.0 if np.nanmax(a, initial=0.0) <= 1.0 else 1.0)
-            flags |= np.where(a < min_availability, int(RecordFlag.LOW_AVAILABILITY), 0)
-        else:
-            a = None
-        los[flags != 0] = np.nan
-        missing = (flags == 0) & (np.isfinite(los).sum(-1) < 3)
-        flags |= np.where(missing, int(RecordFlag.MISSING), 0)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    a = np.nanmin(a[..., :4], axis=-1)  # the worst tilted beam
         return RecordSet(
-            kind="rtd", path=str(p), instrument=_instrument_of(rec, "rtd"),
+            kind="rtd", path=str(p), instrument=_instrument_of(raw, "rtd"),
             time=np.asarray(beams.time, "datetime64[s]"), heights=np.asarray(beams.heights, float),
             flags=flags, los=los, availability=a,
-            scan_angle=_float_attr(rec, "scan_angle"),
-            direction_offset=_float_attr(rec, "direction_offset"),
-            pitch=_float_attr(rec, "pitch", "pitch_angle", header=("PitchAngle",)),
-            roll=_float_attr(rec, "roll", "roll_angle", header=("RollAngle",)),
-            cnr_threshold=threshold,
-            period_s=float(beams.period / np.timedelta64(1, "s")),
-            warnings=tuple(getattr(rec, "warnings", ()) or ()),
-        )
-    raise ValueError(f"{p}: unknown record format {suffix!r}; expected .sta, .stdsta, .rtd or a "
-                     "ZephIR .csv")
+            cnr_threshold=float(getattr(beams, "cnr_threshold", math.nan)),
+            period_s=float(beams.period / np.timedelta64(1, "s")), **facts)
+    kind = "zephir" if suffix == ".csv" else "sta"
+    speed = np.array(rec.speed, np.float64)
+    direction = np.array(rec.direction, np.float64)
+    shape = speed.shape
+    flags = _reader_flags(rec, shape)
+    speed_std = getattr(rec, "speed_std", None)
+    speed_std = None if speed_std is None else np.array(speed_std, np.float64)
+    availability = getattr(rec, "availability", None)
+    availability = None if availability is None else np.array(availability, np.float64)
+    n_samples = None
+    direction_std = _extra(rec, "winddirectiondispersion", "winddirectionstd",
+                           "directiondispersion", "directionstd")
+    if kind == "zephir":
+        ti = _extra(rec, "ti", "turbulenceintensity", "horizontalti")
+        std = _extra(rec, "horizontalwindspeedstd", "windspeedstd", "horizontalwindspeedsd")
+        if std is not None:
+            speed_std = std
+        elif ti is not None:  # TI as a fraction or in percent
+            frac = ti if np.nanmax(np.abs(ti), initial=0.0) <= 1.0 else ti / 100.0
+            speed_std = frac * speed
+        n_samples = _extra(rec, "packetsinaverage", "packets", "validpackets")
+        if availability is None:
+            availability = _extra(rec, "dataavailability", "availability")
+        if availability is not None:
+            flags |= np.where(availability < min_availability,
+                              int(RecordFlag.LOW_AVAILABILITY), 0)
+    # the readers flag these already; kept as a guard for any record handed in
+    bad = (speed < 0) | (direction < 0) | (direction > 360)
+    flags |= np.where(bad, int(RecordFlag.IMPOSSIBLE_VALUE), 0)
+    unusable = (flags & int(BLOCKING_FLAGS)) != 0
+    speed[unusable] = np.nan
+    direction[unusable] = np.nan
+    time = np.asarray(rec.time, "datetime64[s]")
+    return RecordSet(
+        kind=kind, path=str(p), instrument=_instrument_of(rec, kind), time=time,
+        heights=np.asarray(rec.heights, float), flags=flags, speed=speed, direction=direction,
+        speed_std=speed_std, direction_std=direction_std, availability=availability,
+        n_samples=n_samples, period_s=_period_seconds(rec, time), **facts)
 
 
 def _period_seconds(rec, time) -> float:
@@ -464,7 +452,8 @@ class CorrectedRecords:
       `heights` ``(h,)`` m above the lidar (those both the table and the record have);
     - `speed`, `direction`: free-stream horizontal speed (m/s) and meteorological direction
       (degrees), NaN where not converged; `speed_std`, `direction_std`: one-sigma;
-    - `converged`, `flags` (`lidarjax.InverseFlag` bits | `RecordFlag` bits);
+    - `converged`, `flags` (`lidarjax.InverseFlag` bits), `record_flags` (the reader's
+      `RecordFlag` bits: why the file's value is missing or doubtful);
     - `measured_speed`, `measured_direction`: what the instrument reported (for raw LOS
       records, the homogeneous-flow reconstruction);
     - `noise`: the noise level used (m/s; given, from the record's dispersion, or estimated
@@ -486,6 +475,7 @@ class CorrectedRecords:
     measured_direction: np.ndarray
     noise: np.ndarray | None = None
     availability: np.ndarray | None = None
+    record_flags: np.ndarray | None = None
     record_only_heights: tuple[float, ...] = ()
     table_only_heights: tuple[float, ...] = ()
     warnings: tuple[str, ...] = ()
@@ -652,14 +642,13 @@ def correct_records(
         out["speed_std"] *= anisotropic[0]
         out["direction_std"] *= anisotropic[1]
         out["noise"] = np.where(np.isfinite(out["noise"]), anisotropic[0], np.nan)
-    out["flags"] |= flags_rec
     avail = None if rec.availability is None else np.asarray(rec.availability)[:, ri]
     return CorrectedRecords(
         kind=rec.kind, time=np.asarray(rec.time),
         heights=np.asarray(rec.heights, np.float64)[ri],
         measured_speed=np.asarray(measured[0], np.float64),
         measured_direction=np.asarray(measured[1], np.float64),
-        availability=avail,
+        availability=avail, record_flags=np.asarray(flags_rec, np.int64),
         record_only_heights=tuple(record_only), table_only_heights=tuple(table_only),
         warnings=rec.warnings, **out)
 
@@ -667,9 +656,12 @@ def correct_records(
 # ------------------------------------------------------------------------------------------
 # writing
 
-_FLAG_DOC = ("flags bits: 1 too few beams, 2 not converged, 4 ill-conditioned, 8 calm, "
-             "16 no noise estimate, 256 corrupt row, 512 low availability, 1024 impossible "
-             "value, 2048 partial interval, 4096 missing in the file")
+def _flag_doc() -> str:
+    from .inverse import InverseFlag
+
+    inv = ", ".join(f"{int(f)} {f.name.lower()}" for f in InverseFlag if f)
+    rec = ", ".join(f"{int(f)} {f.name.lower()}" for f in RecordFlag if f)
+    return f"flags (lidarjax.InverseFlag bits): {inv}; record_flags (RecordFlag bits): {rec}"
 
 
 def _text_bytes(values: np.ndarray, decimals: int, width: int = 0) -> np.ndarray:
@@ -752,13 +744,14 @@ def write_corrected_csv(path, corrected: CorrectedRecords, metadata: dict | None
     show = _progress("writing CSV", progress)
     target = Path(path)
     head = [f"# {k}: {v}" for k, v in (metadata or {}).items()]
-    head.append(f"# {_FLAG_DOC}")
+    head.append(f"# {_flag_doc()}")
     head.append("time,height [m],speed [m/s],direction [deg],speed_std [m/s],"
-                "direction_std [deg],converged,flags,measured_speed [m/s],"
+                "direction_std [deg],converged,flags,record_flags,measured_speed [m/s],"
                 "measured_direction [deg],availability [%],noise [m/s]")
     heights = [f"{x:g}".encode() for x in c.heights]
     avail = c.availability if c.availability is not None else np.full((n, h), np.nan)
     noise = c.noise if c.noise is not None else np.full((n, h), np.nan)
+    rflags = c.record_flags if c.record_flags is not None else np.zeros((n, h), np.int64)
     with atomic_path(target) as tmp, open(tmp, "xb") as fh:
         fh.write(("\n".join(head) + "\n").encode())
         show(0, n)
@@ -774,6 +767,7 @@ def write_corrected_csv(path, corrected: CorrectedRecords, metadata: dict | None
                 _text_bytes(c.speed_std[s:e], 4), _text_bytes(c.direction_std[s:e], 3),
                 _const_bytes([b"False", b"True"], np.asarray(c.converged[s:e]).astype(int).ravel()),
                 _text_bytes(np.asarray(c.flags[s:e], np.float64), 0),
+                _text_bytes(np.asarray(rflags[s:e], np.float64), 0),
                 _text_bytes(c.measured_speed[s:e], 4), _text_bytes(c.measured_direction[s:e], 3),
                 _text_bytes(avail[s:e], 1), _text_bytes(noise[s:e], 4),
             ]
@@ -799,7 +793,6 @@ def write_corrected_netcdf(path, corrected: CorrectedRecords, metadata: dict | N
 
     c = corrected
     n, h = np.shape(c.speed)
-    flags = [f for f in InverseFlag if f] + [f for f in RecordFlag if f]
     target = Path(path)
     with atomic_path(target) as tmp:
         nc = netcdf_file(os.fspath(tmp), "w", version=2)
@@ -851,11 +844,16 @@ def write_corrected_netcdf(path, corrected: CorrectedRecords, metadata: dict | N
             cv.long_name = "inversion converged"
             cv.flag_values = np.array([0, 1], np.int8)
             cv.flag_meanings = "false true"
-            fl = nc.createVariable("flags", "i4", ("time", "height"))
-            fl[:] = np.asarray(c.flags).astype(np.int32)
-            fl.long_name = "quality flags (bitwise OR)"
-            fl.flag_masks = np.array([int(f) for f in flags], np.int32)
-            fl.flag_meanings = " ".join(f.name.lower() for f in flags)
+            rflags = c.record_flags if c.record_flags is not None else np.zeros((n, h))
+            for name, values, kind, long_name in (
+                    ("flags", c.flags, InverseFlag, "inversion flags (lidarjax.InverseFlag)"),
+                    ("record_flags", rflags, RecordFlag, "record flags from the file "
+                     "(RecordFlag)")):
+                fl = nc.createVariable(name, "i4", ("time", "height"))
+                fl[:] = np.asarray(values).astype(np.int32)
+                fl.long_name = long_name
+                fl.flag_masks = np.array([int(f) for f in kind if f], np.int32)
+                fl.flag_meanings = " ".join(f.name.lower() for f in kind if f)
             nc.flush()
         finally:
             nc.close()
@@ -875,12 +873,12 @@ def quality_summary(c: CorrectedRecords) -> list[str]:
         lines.append(f"availability: median {np.nanmedian(c.availability):.1f} %, below "
                      f"{DEFAULT_MIN_AVAILABILITY:g} %: {int(np.count_nonzero(a < DEFAULT_MIN_AVAILABILITY))}")
     counts = []
-    for flag in list(RecordFlag) + list(InverseFlag):
-        if not flag:
-            continue
-        k = int(np.count_nonzero(np.asarray(c.flags) & int(flag)))
-        if k:
-            counts.append(f"{flag.name.lower()} {k}")
+    rflags = c.record_flags if c.record_flags is not None else np.zeros_like(c.flags)
+    for values, kind in ((rflags, RecordFlag), (c.flags, InverseFlag)):
+        for flag in kind:
+            k = int(np.count_nonzero(np.asarray(values) & int(flag))) if flag else 0
+            if k:
+                counts.append(f"{flag.name.lower()} {k}")
     lines.append("flags: " + (", ".join(counts) if counts else "none"))
     if c.converged.any():
         du = np.abs(c.speed - c.measured_speed)[c.converged]

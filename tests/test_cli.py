@@ -100,7 +100,7 @@ def test_correct_sta_recovers_exact_model_records(seed_case, table_path):
                  str(seed_case / "rec.sta"), "--out", str(out), "--quiet"]) == 0
     rows = [line.split(",") for line in out.read_text().splitlines() if not line.startswith("#")]
     body = np.array(rows[1:])
-    assert body.shape == (n * 3, 12)
+    assert body.shape == (n * 3, 13)
     got = body[:, 2].astype(float).reshape(n, 3)
     got_d = body[:, 3].astype(float).reshape(n, 3)
     ok = np.ones((n, 3), bool)

@@ -22,7 +22,7 @@ import pytest
 import lidarjax as lj
 from lidarjax.cli import main
 from lidarjax.io import Settings, save_table, write_settings, write_sta
-from lidarjax.records import RecordFlag
+from lidarjax.io._common import RecordFlag
 
 HEIGHTS = np.array([40.0, 54.0, 74.0])
 EPSILON = 21.0
@@ -367,19 +367,19 @@ def test_partial_heights_are_named_and_the_rest_corrected(case, capsys):
     named = [ln for ln in err.splitlines() if "has no heights 60, 200" in ln]
     assert len(named) == 1
     body = read_csv(out)
-    assert body.shape == (N * 3, 12)
+    assert body.shape == (N * 3, 13)
     np.testing.assert_allclose(body[:, 2].astype(float).reshape(N, 3), case["truth"][0][:, None]
                                * np.ones((1, 3)), atol=5e-3)
 
 
-@pytest.mark.parametrize("name, edit, flag", [
-    ("negative", lambda s, d, a: s.__setitem__((2, 1), -3.0), RecordFlag.IMPOSSIBLE_VALUE),
-    ("dir400", lambda s, d, a: d.__setitem__((2, 1), 400.0), RecordFlag.IMPOSSIBLE_VALUE),
-    ("dirneg", lambda s, d, a: d.__setitem__((2, 1), -10.0), RecordFlag.IMPOSSIBLE_VALUE),
-    ("lowavail", lambda s, d, a: a.__setitem__((2, 1), 20.0), RecordFlag.LOW_AVAILABILITY),
-    ("nan", lambda s, d, a: s.__setitem__((2, 1), np.nan), RecordFlag.MISSING),
+@pytest.mark.parametrize("name, edit, column, flag", [
+    ("negative", lambda s, d, a: s.__setitem__((2, 1), -3.0), 8, RecordFlag.IMPOSSIBLE_VALUE),
+    ("dir400", lambda s, d, a: d.__setitem__((2, 1), 400.0), 8, RecordFlag.IMPOSSIBLE_VALUE),
+    ("dirneg", lambda s, d, a: d.__setitem__((2, 1), -10.0), 8, RecordFlag.IMPOSSIBLE_VALUE),
+    ("lowavail", lambda s, d, a: a.__setitem__((2, 1), 20.0), 8, RecordFlag.LOW_AVAILABILITY),
+    ("nan", lambda s, d, a: s.__setitem__((2, 1), np.nan), 7, lj.InverseFlag.TOO_FEW_BEAMS),
 ])
-def test_bad_value_is_flagged_good_rows_untouched(case, capsys, name, edit, flag):
+def test_bad_value_is_flagged_good_rows_untouched(case, capsys, name, edit, column, flag):
     g = case["good"]
     speed, direction, avail = g["speed"].copy(), g["direction"].copy(), g["availability"].copy()
     edit(speed, direction, avail)
@@ -391,15 +391,15 @@ def test_bad_value_is_flagged_good_rows_untouched(case, capsys, name, edit, flag
     rc, text, _ = run_cli(correct_argv(case, p, out=out), capsys)
     assert rc == 0
     body = read_csv(out)
-    assert body.shape == (N * 3, 12)  # every record comes back
+    assert body.shape == (N * 3, 13)  # every record comes back
     got = body[:, 2].astype(float).reshape(N, 3)
-    flags = body[:, 7].astype(int).reshape(N, 3)
+    flags = body[:, column].astype(int).reshape(N, 3)
     assert np.isnan(got[2, 1]) and flags[2, 1] & int(flag)
     ok = np.ones((N, 3), bool)
     ok[2, 1] = False
     u = np.broadcast_to(case["truth"][0][:, None], (N, 3))
     np.testing.assert_allclose(got[ok], u[ok], atol=5e-3)  # the spline of 12 directions
-    assert np.all(flags[ok] & ~0xFF == 0)
+    assert np.all(body[:, 7:9].astype(int).reshape(N, 3, 2)[ok] == 0)
     assert flag.name.lower() in text  # the quality summary counts it
 
 
@@ -410,15 +410,16 @@ def test_csv_and_netcdf_are_self_describing(case, capsys):
     rc, text, _ = run_cli(argv, capsys)
     assert rc == 0 and "converged 18 of 18" in text
     head = [ln for ln in out.read_text().splitlines() if ln.startswith("#")]
-    assert any("flags bits" in ln for ln in head)
+    assert any("record_flags (RecordFlag bits)" in ln for ln in head)
     with xr.open_dataset(out.with_suffix(".nc")) as ds:
         assert ds.attrs["Conventions"].startswith("CF")
         assert ds["speed"].attrs["standard_name"] == "wind_speed"
         assert ds["direction"].attrs["standard_name"] == "wind_from_direction"
-        masks = list(ds["flags"].attrs["flag_masks"])
-        meanings = ds["flags"].attrs["flag_meanings"].split()
-        assert len(masks) == len(meanings) and 1024 in masks
-        assert meanings[masks.index(1024)] == "impossible_value"
+        for name, kind in (("flags", lj.InverseFlag), ("record_flags", RecordFlag)):
+            masks = [int(m) for m in ds[name].attrs["flag_masks"]]
+            meanings = ds[name].attrs["flag_meanings"].split()
+            assert masks == [int(f) for f in kind if f]
+            assert meanings == [f.name.lower() for f in kind if f]
         np.testing.assert_allclose(ds["speed"].values, case["truth"][0][:, None] * np.ones(3),
                                    atol=5e-3)
         assert np.all(ds["speed_std"].values > 0)  # from the dispersion, not NaN

@@ -34,7 +34,7 @@ def register(sub) -> None:
                           "CNRThreshold)")
     cor.add_argument("--min-availability", type=finite_float, default=None,
                      help="records below this data availability (percent) are flagged and not "
-                          "used (default 50)")
+                          "used (default 80)")
     cor.add_argument("--allow-mismatch", action="store_true",
                      help="correct although the record header disagrees with the table (scan, "
                           "cone angle, direction offset); the mismatch is printed")
@@ -83,19 +83,20 @@ def run(args) -> int:
     table, meta = load_table(args.table, return_metadata=True)
     progress = not args.quiet
     t0 = time.perf_counter()
-    rec = load_records(records, cnr_threshold=args.cnr_threshold, min_availability=min_avail)
+    rec = load_records(records, cnr_threshold=args.cnr_threshold, min_availability=min_avail,
+                       progress=progress)
     if progress:
         say(f"read {rec.time.size} records x {rec.heights.size} heights from {records} in "
             f"{time.perf_counter() - t0:.1f} s")
-    for w in rec.warnings:
-        say(f"warning: {w}")
-    for w in table_warnings(meta):
-        say(f"warning: {w}")
     mismatch = check_instrument(meta, table, rec)
     if mismatch and not args.allow_mismatch:
         raise ValueError(f"{records} does not match the table {args.table}: "
                          f"{'; '.join(mismatch)} (rebuild the table for this instrument, or "
                          "pass --allow-mismatch)")
+    for w in rec.warnings:  # after the refusals: a refused file gets one line
+        say(f"warning: {w}")
+    for w in table_warnings(meta):
+        say(f"warning: {w}")
     for m in mismatch:
         say(f"warning: mismatch allowed: {m}")
     result = correct_records(table, records, records=rec, noise=args.noise,
