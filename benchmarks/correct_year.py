@@ -95,11 +95,42 @@ def run(argv, env):
     return wall, rss, cpu
 
 
+def plot(out: dict, path: Path) -> None:
+    """Bars of wall and CPU time per run (matplotlib, optional)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return
+    runs = ["cold", "warm", "warm_2", "no_cache", "big_warm"]
+    labels = ["cold", "warm", "warm again", "--no-cache", f"warm, {out['rows_big']:,} rows"]
+    x = np.arange(len(runs))
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.bar(x - 0.2, [out[r]["wall_s"] for r in runs], 0.4, label="wall (loaded machine)")
+    ax.bar(x + 0.2, [out[r]["cpu_s"] for r in runs], 0.4, label="CPU (user + system)")
+    ax.axhline(10.0, color="k", lw=0.8, ls="--", label="10 s target (one year)")
+    ax.set_xticks(x, labels, fontsize=8)
+    ax.set_ylabel("seconds")
+    ax.set_title(f"lidarjax correct, {out['rows_year']:,} x 12 records (load "
+                 f"{out['load_average_at_start']:.0f} on 2 cores)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--plot-only", action="store_true", help="redraw the PNG from the JSON")
     ap.add_argument("--reuse", default=None, help="folder of a previous run's inputs")
     args = ap.parse_args()
+    if args.plot_only:
+        res = ROOT / "benchmarks" / "results"
+        plot(json.loads((res / "correct_year.json").read_text()), res / "correct_year.png")
+        return
     n_year = 5000 if args.quick else 52_560
     n_big = 10_000 if args.quick else 200_000
     work = Path(args.reuse) if args.reuse else Path(tempfile.mkdtemp(prefix="lidarjax-bench-"))
@@ -155,6 +186,7 @@ def main():
         md.append(f"| {label} | {rows:,} x 12 | {out[k]['wall_s']:.2f} | {out[k]['cpu_s']:.2f} | "
                   f"{out[k]['peak_rss_mb']:.0f} |")
     (res / f"{name}.md").write_text("\n".join(md) + "\n")
+    plot(out, res / f"{name}.png")
 
 
 if __name__ == "__main__":
