@@ -241,6 +241,15 @@ def add_run_arguments(parser, *, default_scan: str) -> None:
     parser.add_argument("--scan", choices=SCAN_CHOICES, default=default_scan)
     parser.add_argument("--cone-angle", type=positive_float, default=None,
                         help="cone angle in degrees (default: the scan's, 30 / 28 / 30)")
+    parser.add_argument("--u-ref", type=vector, default=(-15.0, 0.0, 0.0),
+                        help="free stream u,v,w in the CFD frame, m/s (default: the seed "
+                             "UDF's -15,0,0)")
+    add_probe_arguments(parser)
+
+
+def add_tilt_arguments(parser) -> None:
+    """--pitch, --roll, --tilt-compensation (`simulate`, `table`; other commands that define
+    their own tilt options do not call this)."""
     parser.add_argument("--pitch", type=tilt_angle, default=0.0,
                         help="installation pitch in degrees (lidarjax.Mount; positive raises the "
                              "S0 side; -90 is a forward-looking nacelle lidar). Default level")
@@ -249,10 +258,6 @@ def add_run_arguments(parser, *, default_scan: str) -> None:
     parser.add_argument("--tilt-compensation", action="store_true",
                         help="the instrument knows its tilt and reconstructs with the level "
                              "beam directions (default: it believes it is level)")
-    parser.add_argument("--u-ref", type=vector, default=(-15.0, 0.0, 0.0),
-                        help="free stream u,v,w in the CFD frame, m/s (default: the seed "
-                             "UDF's -15,0,0)")
-    add_probe_arguments(parser)
 
 
 def add_probe_arguments(parser) -> None:

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from ._common import add_run_arguments, field_paths, make_probe, make_scan, selected_betas
+from ._common import add_run_arguments, add_tilt_arguments, field_paths, make_probe, make_scan, selected_betas
 
 
 def register(sub) -> None:
@@ -25,6 +25,7 @@ def register(sub) -> None:
                                                  "settings file's beta)")
     which.add_argument("--all", action="store_true", help="run every beta row, one batch")
     add_run_arguments(sim, default_scan="windcube_v1")
+    add_tilt_arguments(sim)
     sim.add_argument("--out", default=".", help="output folder (default: .)")
     sim.set_defaults(func=run)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from ._common import (
     add_run_arguments,
+    add_tilt_arguments,
     check_output_file,
     field_paths,
     height_list,
@@ -24,6 +25,7 @@ def register(sub) -> None:
                "--scan windcube_v2 --heights-from wls7_2020_10_07.sta --out site_table.npz")
     tab.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
     add_run_arguments(tab, default_scan="windcube_v2")
+    add_tilt_arguments(tab)
     heights = tab.add_mutually_exclusive_group()
     heights.add_argument("--heights", type=height_list, default=None,
                          help="measurement heights in m above the lidar, e.g. 40,54,74 "
