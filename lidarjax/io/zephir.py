@@ -214,6 +214,9 @@ _END = re.compile(r"end\s+of\s+(the\s+)?(averag\w*\s+)?(period|interval|averag)"
 _AVERAGING = re.compile(r"averag\w*[^0-9\n]{0,30}?(\d+(?:\.\d+)?)\s*(s|sec|seconds|min|"
                         r"minutes|mins)\b", re.IGNORECASE)
 
+_AVERAGING_UNIT_FIRST = re.compile(r"averag\w*[^0-9\n(]{0,30}\(\s*(s|sec|seconds|min|minutes)"
+                                   r"\s*\)[^0-9\n]{0,5}(\d+(?:\.\d+)?)", re.IGNORECASE)
+
 
 def _conventions(texts: list[str], path) -> tuple[str, str, float, float | None, list[str]]:
     """(convention, zone text, offset hours, period seconds or None, notes) from texts."""
@@ -235,7 +238,10 @@ def _conventions(texts: list[str], path) -> tuple[str, str, float, float | None,
                      "column; times taken as UTC")
     period = None
     m = _AVERAGING.search(joined)
-    if m:
+    u = _AVERAGING_UNIT_FIRST.search(joined)
+    if u:
+        period = float(u.group(2)) * (60.0 if u.group(1).lower().startswith("m") else 1.0)
+    elif m:
         period = float(m.group(1)) * (60.0 if m.group(2).lower().startswith("m") else 1.0)
     return convention, zone, offset, period, notes
 
@@ -282,7 +288,8 @@ def read_zephir_csv(
     for number, line in enumerate(lines[:200], start=1):
         delimiter, decimal = _detect(line)
         cells = next(csv.reader([line], delimiter=delimiter), [])
-        if any(_plain(c) in _TIME_NAMES for c in cells):
+        if any(_plain(c) in _TIME_NAMES for c in cells) and (
+                len(cells) > 2 or any(_height_of(c) for c in cells)):
             header = [c.strip() for c in cells]
             header_line = number
             break
