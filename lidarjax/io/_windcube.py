@@ -288,7 +288,10 @@ def read_windcube(
             scalar_cols[name.strip()] = i
             continue
         altitude = float(am.group(1))
-        key = normalise_key(am.group(2))
+        dup = re.search(r"#(\d+)$", am.group(2))
+        key = normalise_key(am.group(2)[: dup.start()] if dup else am.group(2))
+        if dup:
+            key = f"{key}#{dup.group(1)}"
         if not key:
             raise file_error(p, column_line, f"column {name!r}: no quantity after the altitude")
         if (altitude, key) in seen:

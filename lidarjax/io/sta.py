@@ -303,6 +303,9 @@ def read_sta(
     step = regular_step(parsed.time, parsed.time_ok)
     t_local, inferred, keep = infer_bad_times(parsed.time, parsed.time_ok, step)
     messages = report(parsed, "record")
+    for i in np.flatnonzero(~keep):
+        messages.append(f"{p}, line {parsed.row_lines[i]}: left out: its time stamp is "
+                        "unreadable and the neighbouring rows are not regular enough to infer it")
     t, k = int(keep.sum()), parsed.heights.size
     flags = np.zeros((t, k), dtype=np.int32)
     row_ok = parsed.row_ok[keep]

@@ -281,19 +281,28 @@ def read_zephir_csv(
                          f"{utc_offset_hours!r}")
     p = require_file(path, "ZephIR CSV file")
     lines = read_text(p).splitlines()
+    if re.match(r"^\s*(HeaderSize|HeaderLength)\s*=", lines[0].lstrip("\ufeff"), re.IGNORECASE):
+        raise file_error(p, 1, "this is a Windcube file (HeaderSize=/HeaderLength=), not a "
+                         "ZephIR CSV export; read it with read_sta or read_rtd")
     preamble: list[str] = []
     header: list[str] | None = None
     delimiter, decimal = ",", "."
     header_line = 0
+    candidate = None  # a line naming a time column but no height: used if nothing better
     for number, line in enumerate(lines[:200], start=1):
         delimiter, decimal = _detect(line)
         cells = next(csv.reader([line], delimiter=delimiter), [])
-        if any(_plain(c) in _TIME_NAMES for c in cells) and (
-                len(cells) > 2 or any(_height_of(c) for c in cells)):
-            header = [c.strip() for c in cells]
-            header_line = number
-            break
+        if any(_plain(c) in _TIME_NAMES for c in cells):
+            if any(_height_of(c) for c in cells):
+                header = [c.strip() for c in cells]
+                header_line = number
+                break
+            if candidate is None:
+                candidate = (number, delimiter, decimal, [c.strip() for c in cells])
         preamble.append(line)
+    if header is None and candidate is not None:
+        header_line, delimiter, decimal, header = candidate
+        preamble = preamble[: header_line - 1]
     if header is None:
         raise file_error(
             p, None, "no header line naming a time column ('Time and Date' or "
