@@ -348,12 +348,16 @@ def read_windcube(
             row_lines.append(column_line + 1 + j)
     n = len(rows)
     problems: list[tuple[int, str]] = []
-    split = [r.split("\t", needed) for r in rows] if n else []
-    count_ok = np.array([len(f) >= needed for f in split], dtype=bool)
+    counts = np.array([r.count("\t") + 1 for r in rows], dtype=np.int64)
+    count_ok = counts >= needed
     # Extra non-empty fields beyond the header's columns mean a shifted row.
     over = np.zeros(n, dtype=bool)
-    for i in np.flatnonzero(np.array([r.count("\t") >= n_fields for r in rows], dtype=bool)):
+    for i in np.flatnonzero(counts > n_fields):
         over[i] = any(x.strip() for x in rows[i].split("\t")[n_fields:])
+    head = time_col + (2 if two_part_time else 1)
+    if scalar_cols:
+        head = max(head, max(scalar_cols.values()) + 1)
+    split = [r.split("\t", head) for r in rows]  # only the leading fields are needed
     stamps = []
     for f in split:
         if len(f) > time_col:
@@ -376,7 +380,7 @@ def read_windcube(
     for i in np.flatnonzero(~row_ok):
         if not count_ok[i]:
             why = (f"cut row: expected at least {needed} tab-separated fields, found "
-                   f"{len(split[i])}")
+                   f"{counts[i]}")
         elif over[i]:
             why = f"more fields than the {n_fields} columns (shifted row)"
         elif not time_ok[i]:
@@ -389,7 +393,7 @@ def read_windcube(
         problems.append((row_lines[i], why))
         values[i] = np.nan
     scalars: dict[str, list[str]] = {
-        name: [f[col].strip() if len(f) > col else "" for f in split]
+        name: [f[col].strip() if len(f) > col and col < head else "" for f in split]
         for name, col in scalar_items
     }
     index = {h: j for j, h in enumerate(heights.tolist())}
