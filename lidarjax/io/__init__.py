@@ -23,9 +23,9 @@ from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
+from .rtd import InstrumentReconstruction as InstrumentReconstruction
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord
-from .rtd import InstrumentReconstruction as InstrumentReconstruction
 from .rtd import group_rtd as group_rtd
 from .rtd import instrument_reconstruction as instrument_reconstruction
 from .rtd import read_rtd as read_rtd
