@@ -252,9 +252,11 @@ def read_windcube(
     columns = _unique(columns, notes, p, column_line)
 
     header_heights: list[float] | None = None
-    alt_value = header_lookup(header, "Altitudes (m)")
+    alt_names = ("Altitudes (m)", "Altitudes AGL (m)", "Altitude (m)", "Heights (m)")
+    alt_value = header_lookup(header, *alt_names)
     if alt_value is not None:
-        alt_key = next(k for k in header if normalise_key(k) == "altitudes")
+        wanted = {normalise_key(a) for a in alt_names}
+        alt_key = next(k for k in header if normalise_key(k) in wanted)
         try:
             header_heights = [float(a) for a in alt_value.replace(",", " ").split()]
         except ValueError:

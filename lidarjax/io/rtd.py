@@ -201,6 +201,9 @@ def read_rtd(
         raise file_error(p, parsed.scalar_lines, "no 'Position' column (beam azimuth or V); "
                          "the file cannot say which beam each row measured")
     raw_positions = parsed.scalars.pop(pos_name)
+    if normalise_key(pos_name) == "losid":  # LOS ID 0..4: 0/90/180/270 degrees, 4 = vertical
+        los_id = {"0": "0", "1": "90", "2": "180", "3": "270", "4": "V"}
+        raw_positions = [los_id.get(v.strip().split(".")[0], v) for v in raw_positions]
     n = len(raw_positions)
     vertical = np.array([t.strip().upper() == "V" for t in raw_positions], dtype=bool)
     position = np.full(n, np.nan)
