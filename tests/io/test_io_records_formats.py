@@ -164,3 +164,13 @@ def test_large_sta_reads_fast_and_every_row(tmp_path):
     elapsed = time.perf_counter() - t0
     assert r.time.size == n and np.abs(r.speed - speed).max() < 1e-4
     assert elapsed < 5.0  # about 0.1 s on an idle core; generous for a loaded CI machine
+
+
+def test_rtd_los_id_column(tmp_path):
+    text = S.rtd_v2_text(n_cycles=1).replace("\tPosition\t", "\tLOS ID\t")
+    for pos, los_id in (("\tV\t", "\t4\t"), ("\t90\t", "\t1\t"), ("\t180\t", "\t2\t"),
+                        ("\t270\t", "\t3\t")):
+        text = text.replace(pos, los_id)
+    rec = read_rtd(write(tmp_path, "id.rtd", text))
+    np.testing.assert_array_equal(rec.vertical, [True, False, False, False, False])
+    np.testing.assert_array_equal(rec.position[1:], [0.0, 90.0, 180.0, 270.0])
