@@ -22,19 +22,25 @@ from pathlib import Path
 import numpy as np
 
 CHILD = r"""
-import resource, sys, time
+import sys, time
 kind, path = sys.argv[1], sys.argv[2]
+if kind == "read_sta":
+    from lidarjax.io import read_sta  # imported before the clock starts (jax import excluded)
+else:
+    import pandas as pd
+BASE = int([ln for ln in open("/proc/self/status") if ln.startswith("VmRSS")][0].split()[1])
 t0 = time.perf_counter()
 if kind == "read_sta":
-    from lidarjax.io import read_sta
     r = read_sta(path)
     n = r.time.size
 else:
-    import pandas as pd
     df = pd.read_csv(path, sep="\t", skiprows=11, encoding="cp1252")
     n = len(df)
 dt = time.perf_counter() - t0
-print(n, dt, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+# VmHWM: this process's peak resident memory (ru_maxrss would include the parent's, kept
+# across exec), minus the resident size before reading (interpreter + imports)
+hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM")][0].split()[1]
+print(n, dt, int(hwm) / 1024, BASE / 1024)
 """
 
 
@@ -49,14 +55,16 @@ def make(path: Path, n: int, k: int = 12) -> None:
 
 
 def run(kind: str, path: Path, repeat: int) -> dict:
-    times, mem = [], []
+    times, mem, base = [], [], []
     for _ in range(repeat):
         out = subprocess.run([sys.executable, "-c", CHILD, kind, str(path)], check=True,
                              capture_output=True, text=True).stdout.split()
         times.append(float(out[1]))
         mem.append(float(out[2]))
+        base.append(float(out[3]))
     return {"rows": int(out[0]), "median_s": float(np.median(times)),
-            "peak_rss_mb": float(np.median(mem))}
+            "peak_rss_mb": float(np.median(mem)),
+            "rss_before_read_mb": float(np.median(base))}
 
 
 def main() -> None:
@@ -64,7 +72,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="smaller files, one repeat")
     args = ap.parse_args()
     sizes = {"month": 4320} if args.quick else {"year": 52_560, "200k": 200_000}
-    repeat = 1 if args.quick else 3
+    repeat = 1 if args.quick else 2
     try:
         import pandas  # noqa: F401
         baselines = ["pandas_read_csv"]
@@ -89,12 +97,14 @@ def main() -> None:
     out.mkdir(exist_ok=True)
     name = "read_records_quick" if args.quick else "read_records"
     (out / f"{name}.json").write_text(json.dumps(results, indent=2) + "\n")
-    rows = ["| file | rows | read_sta (s) | peak RSS (MB) | pandas read_csv (s) | write_sta (s) |",
-            "|---|---|---|---|---|---|"]
+    rows = ["| file | rows | read_sta (s) | peak RSS (MB) (of which before reading) | "
+            "pandas read_csv (s) | write_sta (s) |", "|---|---|---|---|---|---|"]
     for label, e in results["runs"].items():
         pd_s = f"{e['pandas_read_csv']['median_s']:.2f}" if baselines else "n/a"
         rows.append(f"| {label} | {e['read_sta']['rows']} | {e['read_sta']['median_s']:.2f} | "
-                    f"{e['read_sta']['peak_rss_mb']:.0f} | {pd_s} | {e['write_sta_s']:.1f} |")
+                    f"{e['read_sta']['peak_rss_mb']:.0f} "
+                    f"({e['read_sta']['rss_before_read_mb']:.0f}) | {pd_s} | "
+                    f"{e['write_sta_s']:.1f} |")
     (out / f"{name}.md").write_text("\n".join(rows) + "\n")
 
 
