@@ -266,6 +266,7 @@ def read_windcube(
             ) from None
 
     data = [ln.rstrip("\r") for ln in lines[column_line:]]
+    del lines, text  # keep the peak memory to one copy of the rows
     # V1 may split the stamp in two fields (date \t time) under one 'Date' name.
     time_col = next(i for i, c in enumerate(columns) if _is_time_name(c))
     first_row = next((ln for ln in data if ln.strip()), None)
