@@ -177,6 +177,9 @@ def _parse_block(lines: list[str], cols: list[int]) -> tuple[np.ndarray, np.ndar
     ok = np.ones(n, dtype=bool)
     if not cols or n == 0:
         return out, ok
+    fast = _pandas_block(lines, cols)
+    if fast is not None:
+        return fast, ok
     for s in range(0, n, CHUNK):
         part = lines[s:s + CHUNK]
         try:
@@ -193,6 +196,28 @@ def _parse_block(lines: list[str], cols: list[int]) -> tuple[np.ndarray, np.ndar
             except (ValueError, IndexError):
                 ok[s + i] = False
     return out, ok
+
+
+def _pandas_block(lines: list[str], cols: list[int]) -> np.ndarray | None:
+    """pandas' C parser on a clean block (about 10x faster than `numpy.loadtxt`), when the
+    optional pandas is installed; None when it is not or when any cell is not a number (the
+    caller then isolates the bad rows chunk by chunk)."""
+    try:
+        import pandas as pd
+    except ImportError:
+        return None
+    import io
+
+    try:
+        df = pd.read_csv(
+            io.StringIO("\n".join(lines)), sep="\t", header=None, usecols=cols,
+            dtype=np.float64, engine="c", na_values=["NA", "N/A", "NaN", "nan", ""],
+            keep_default_na=False, skip_blank_lines=False, quoting=3,
+        )
+    except (ValueError, TypeError, pd.errors.ParserError):
+        return None
+    values = df[cols].to_numpy(dtype=np.float64)
+    return values if values.shape == (len(lines), len(cols)) else None
 
 
 def read_windcube(
@@ -355,8 +380,8 @@ def read_windcube(
     count_ok = counts >= needed
     # Extra non-empty fields beyond the header's columns mean a shifted row.
     over = np.zeros(n, dtype=bool)
-    for i in np.flatnonzero(counts > n_fields):
-        over[i] = any(x.strip() for x in rows[i].split("\t")[n_fields:])
+    for i in np.flatnonzero(counts > n_fields):  # trailing empty fields are fine
+        over[i] = rows[i].rstrip("\t\r ").count("\t") + 1 > n_fields
     head = time_col + (2 if two_part_time else 1)
     if scalar_cols:
         head = max(head, max(scalar_cols.values()) + 1)

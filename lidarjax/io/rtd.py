@@ -459,7 +459,13 @@ def group_rtd(
             gaps.append(np.diff(np.sort(tb)))
     all_gaps = np.concatenate(gaps) if gaps else np.zeros(0, np.int64)
     all_gaps = all_gaps[all_gaps > 0]
-    cycle = int(np.median(all_gaps)) if all_gaps.size else ms
+    if all_gaps.size:
+        cycle = int(np.median(all_gaps))
+    else:  # one sample per beam: the spacing of consecutive samples times the beam count
+        steps = np.diff(np.sort(t_ms))
+        steps = steps[steps > 0]
+        n_beams = int(np.unique(beam).size)
+        cycle = int(np.median(steps)) * n_beams if steps.size else ms
     expected = max(ms / cycle, 1.0)
     in_scan = n_samples.sum(axis=0) > 0  # (b,)
     with np.errstate(invalid="ignore", divide="ignore"):
