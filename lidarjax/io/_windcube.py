@@ -208,16 +208,24 @@ def _pandas_block(lines: list[str], cols: list[int]) -> np.ndarray | None:
         return None
     import io
 
-    try:
-        df = pd.read_csv(
-            io.StringIO("\n".join(lines)), sep="\t", header=None, usecols=cols,
-            dtype=np.float64, engine="c", na_values=["NA", "N/A", "NaN", "nan", ""],
-            keep_default_na=False, skip_blank_lines=False, quoting=3,
-        )
-    except (ValueError, TypeError, pd.errors.ParserError):
-        return None
-    values = df[cols].to_numpy(dtype=np.float64)
-    return values if values.shape == (len(lines), len(cols)) else None
+    out = np.empty((len(lines), len(cols)))
+    step = 50_000  # bounded memory: one block of text at a time
+    for s in range(0, len(lines), step):
+        part = lines[s:s + step]
+        try:
+            buf = io.BytesIO("\n".join(part).encode("utf-8", errors="replace"))
+            df = pd.read_csv(
+                buf, sep="\t", header=None, usecols=cols, dtype=np.float64, engine="c",
+                na_values=["NA", "N/A", "NaN", "nan", ""], keep_default_na=False,
+                skip_blank_lines=False, quoting=3,
+            )
+        except (ValueError, TypeError, UnicodeError, pd.errors.ParserError):
+            return None
+        values = df[cols].to_numpy(dtype=np.float64)
+        if values.shape != (len(part), len(cols)):
+            return None
+        out[s:s + len(part)] = values
+    return out
 
 
 def read_windcube(
@@ -385,7 +393,7 @@ def read_windcube(
     head = time_col + (2 if two_part_time else 1)
     if scalar_cols:
         head = max(head, max(scalar_cols.values()) + 1)
-    split = [r.split("\t", head) for r in rows]  # only the leading fields are needed
+    split = [r.split("\t", head)[:head] for r in rows]  # only the leading fields are kept
     stamps = []
     for f in split:
         if len(f) > time_col:
