@@ -174,3 +174,14 @@ def test_rtd_los_id_column(tmp_path):
     rec = read_rtd(write(tmp_path, "id.rtd", text))
     np.testing.assert_array_equal(rec.vertical, [True, False, False, False, False])
     np.testing.assert_array_equal(rec.position[1:], [0.0, 90.0, 180.0, 270.0])
+
+
+def test_without_pandas_same_values(tmp_path, monkeypatch):
+    """pandas is only an optional fast path: the numpy path reads the same numbers."""
+    path = write(tmp_path, "p.sta", S.sta_v2_text(n=8))
+    with_pandas = read_sta(path)
+    monkeypatch.setitem(sys.modules, "pandas", None)
+    without = read_sta(path)
+    for name in ("speed", "direction", "w", "cnr", "availability"):
+        np.testing.assert_array_equal(getattr(with_pandas, name), getattr(without, name))
+    np.testing.assert_array_equal(with_pandas.time, without.time)
