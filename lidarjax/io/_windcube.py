@@ -307,7 +307,10 @@ def read_windcube(
         f = first_row.split("\t")
         if (len(f) > time_col + 1 and _DATE_ONLY.match(f[time_col])
                 and _TIME_ONLY.match(f[time_col + 1])):
-            columns = columns[: time_col + 1] + ["__time_of_day"] + columns[time_col + 1:]
+            if len(columns) > time_col + 1 and _is_time_name(columns[time_col + 1]):
+                columns[time_col + 1] = "__time_of_day"  # 'Date' and 'Time' columns
+            else:  # one 'Date' name over two fields
+                columns = columns[: time_col + 1] + ["__time_of_day"] + columns[time_col + 1:]
 
     mapped: list[tuple[int, float, str]] = []  # (column, altitude, quantity key)
     scalar_cols: dict[str, int] = {}

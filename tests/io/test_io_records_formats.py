@@ -185,3 +185,10 @@ def test_without_pandas_same_values(tmp_path, monkeypatch):
     for name in ("speed", "direction", "w", "cnr", "availability"):
         np.testing.assert_array_equal(getattr(with_pandas, name), getattr(without, name))
     np.testing.assert_array_equal(with_pandas.time, without.time)
+
+
+def test_v1_separate_date_and_time_columns(tmp_path):
+    text = S.sta_v1_text(split_date=True).replace("Date\tWiper", "Date\tTime\tWiper")
+    r = read_sta(write(tmp_path, "dt.sta", text))
+    assert r.time_local[1] == np.datetime64("2012-09-01T00:20:00") and r.speed[1, 0] == 7.0
+    assert "Time" not in r.scalars and np.all(r.flags == 0)
