@@ -11,6 +11,9 @@ Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/wr
 without it.
 """
 
+from ._common import BLOCKING_FLAGS as BLOCKING_FLAGS
+from ._common import MIN_AVAILABILITY as MIN_AVAILABILITY
+from ._common import RecordFlag as RecordFlag
 from .fields import FieldArrays as FieldArrays
 from .fields import FieldLoadReport as FieldLoadReport
 from .fields import load_field as load_field
@@ -20,9 +23,11 @@ from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
+from .rtd import InstrumentReconstruction as InstrumentReconstruction
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord
 from .rtd import group_rtd as group_rtd
+from .rtd import instrument_reconstruction as instrument_reconstruction
 from .rtd import read_rtd as read_rtd
 from .seed_output import SEED_COLUMNS as SEED_COLUMNS
 from .seed_output import SEED_UNITS as SEED_UNITS

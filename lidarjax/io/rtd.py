@@ -201,6 +201,9 @@ def read_rtd(
         raise file_error(p, parsed.scalar_lines, "no 'Position' column (beam azimuth or V); "
                          "the file cannot say which beam each row measured")
     raw_positions = parsed.scalars.pop(pos_name)
+    if normalise_key(pos_name) == "losid":  # LOS ID 0..4: 0/90/180/270 degrees, 4 = vertical
+        los_id = {"0": "0", "1": "90", "2": "180", "3": "270", "4": "V"}
+        raw_positions = [los_id.get(v.strip().split(".")[0], v) for v in raw_positions]
     n = len(raw_positions)
     vertical = np.array([t.strip().upper() == "V" for t in raw_positions], dtype=bool)
     position = np.full(n, np.nan)
@@ -456,7 +459,13 @@ def group_rtd(
             gaps.append(np.diff(np.sort(tb)))
     all_gaps = np.concatenate(gaps) if gaps else np.zeros(0, np.int64)
     all_gaps = all_gaps[all_gaps > 0]
-    cycle = int(np.median(all_gaps)) if all_gaps.size else ms
+    if all_gaps.size:
+        cycle = int(np.median(all_gaps))
+    else:  # one sample per beam: the spacing of consecutive samples times the beam count
+        steps = np.diff(np.sort(t_ms))
+        steps = steps[steps > 0]
+        n_beams = int(np.unique(beam).size)
+        cycle = int(np.median(steps)) * n_beams if steps.size else ms
     expected = max(ms / cycle, 1.0)
     in_scan = n_samples.sum(axis=0) > 0  # (b,)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -303,6 +303,9 @@ def read_sta(
     step = regular_step(parsed.time, parsed.time_ok)
     t_local, inferred, keep = infer_bad_times(parsed.time, parsed.time_ok, step)
     messages = report(parsed, "record")
+    for i in np.flatnonzero(~keep):
+        messages.append(f"{p}, line {parsed.row_lines[i]}: left out: its time stamp is "
+                        "unreadable and the neighbouring rows are not regular enough to infer it")
     t, k = int(keep.sum()), parsed.heights.size
     flags = np.zeros((t, k), dtype=np.int32)
     row_ok = parsed.row_ok[keep]
@@ -439,15 +442,14 @@ def write_sta(
         names += [f"{h}m {q}" for q in cols]
     lines.append("\t".join(names))
 
-    def num(v):
-        return "NaN" if not np.isfinite(v) else f"{v:.4f}"
-
+    # vectorised formatting: one (t, k * q) block of text, NaN written as ``NaN``
+    block = np.stack([arrays[q] for q in cols], axis=-1).reshape(t, -1)
+    text = np.char.mod("%.4f", block)
+    text[~np.isfinite(block)] = "NaN"
+    stamps = np.datetime_as_string(time.astype("datetime64[m]"), unit="m")
+    stamps = np.char.replace(np.char.replace(stamps, "-", "/"), "T", " ")
     for i in range(t):
-        stamp = str(time[i].astype("datetime64[m]")).replace("-", "/").replace("T", " ")
-        row = [stamp]
-        for j in range(k):
-            row += [num(arrays[q][i, j]) for q in cols]
-        lines.append("\t".join(row) + "\t")
+        lines.append(stamps[i] + "\t" + "\t".join(text[i].tolist()) + "\t")
     target = Path(path)
     with atomic_path(target) as tmp, open(tmp, "x", encoding="cp1252", newline="\n") as fh:
         fh.write("\n".join(lines) + "\n")

@@ -214,6 +214,9 @@ _END = re.compile(r"end\s+of\s+(the\s+)?(averag\w*\s+)?(period|interval|averag)"
 _AVERAGING = re.compile(r"averag\w*[^0-9\n]{0,30}?(\d+(?:\.\d+)?)\s*(s|sec|seconds|min|"
                         r"minutes|mins)\b", re.IGNORECASE)
 
+_AVERAGING_UNIT_FIRST = re.compile(r"averag\w*[^0-9\n(]{0,30}\(\s*(s|sec|seconds|min|minutes)"
+                                   r"\s*\)[^0-9\n]{0,5}(\d+(?:\.\d+)?)", re.IGNORECASE)
+
 
 def _conventions(texts: list[str], path) -> tuple[str, str, float, float | None, list[str]]:
     """(convention, zone text, offset hours, period seconds or None, notes) from texts."""
@@ -235,7 +238,10 @@ def _conventions(texts: list[str], path) -> tuple[str, str, float, float | None,
                      "column; times taken as UTC")
     period = None
     m = _AVERAGING.search(joined)
-    if m:
+    u = _AVERAGING_UNIT_FIRST.search(joined)
+    if u:
+        period = float(u.group(2)) * (60.0 if u.group(1).lower().startswith("m") else 1.0)
+    elif m:
         period = float(m.group(1)) * (60.0 if m.group(2).lower().startswith("m") else 1.0)
     return convention, zone, offset, period, notes
 
@@ -275,18 +281,28 @@ def read_zephir_csv(
                          f"{utc_offset_hours!r}")
     p = require_file(path, "ZephIR CSV file")
     lines = read_text(p).splitlines()
+    if re.match(r"^\s*(HeaderSize|HeaderLength)\s*=", lines[0].lstrip("\ufeff"), re.IGNORECASE):
+        raise file_error(p, 1, "this is a Windcube file (HeaderSize=/HeaderLength=), not a "
+                         "ZephIR CSV export; read it with read_sta or read_rtd")
     preamble: list[str] = []
     header: list[str] | None = None
     delimiter, decimal = ",", "."
     header_line = 0
+    candidate = None  # a line naming a time column but no height: used if nothing better
     for number, line in enumerate(lines[:200], start=1):
         delimiter, decimal = _detect(line)
         cells = next(csv.reader([line], delimiter=delimiter), [])
         if any(_plain(c) in _TIME_NAMES for c in cells):
-            header = [c.strip() for c in cells]
-            header_line = number
-            break
+            if any(_height_of(c) for c in cells):
+                header = [c.strip() for c in cells]
+                header_line = number
+                break
+            if candidate is None:
+                candidate = (number, delimiter, decimal, [c.strip() for c in cells])
         preamble.append(line)
+    if header is None and candidate is not None:
+        header_line, delimiter, decimal, header = candidate
+        preamble = preamble[: header_line - 1]
     if header is None:
         raise file_error(
             p, None, "no header line naming a time column ('Time and Date' or "
