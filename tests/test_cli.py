@@ -126,7 +126,10 @@ def test_correct_rtd_uses_raw_beams(seed_case, table_path):
     text = "\n".join([f"HeaderSize={len(header)}", *header, "\t".join(cols), *rows]) + "\n"
     path = seed_case / "rec.rtd"
     path.write_bytes(text.encode("cp1252"))
-    assert main(["correct", "--table", str(table_path), "--records", str(path), "--quiet"]) == 0
+    # five samples in ten minutes is far below the 80 % availability minimum: lift it, the
+    # point here is the raw-beam inversion
+    assert main(["correct", "--table", str(table_path), "--records", str(path), "--quiet",
+                 "--min-availability", "0"]) == 0
     body = [line.split(",") for line in (seed_case / "rec_corrected.csv").read_text().splitlines()
             if not line.startswith(("#", "time"))]
     assert len(body) == 3
