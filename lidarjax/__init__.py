@@ -37,6 +37,7 @@ from .probe import AbstractProbe as AbstractProbe
 from .probe import CWProbe as CWProbe
 from .probe import PointProbe as PointProbe
 from .probe import PulsedProbe as PulsedProbe
+from .records import RecordFlag as RecordFlag
 from .response import PeriodicSpline as PeriodicSpline
 from .response import ResponseTable as ResponseTable
 from .roses import CorrectionRose as CorrectionRose

@@ -7,19 +7,21 @@ batch when the CFD runs share a grid (one trace, ``jax.vmap`` over the runs), an
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .angles import horizontal_speed, seed_azimuth, wind_direction
+from .angles import horizontal_speed, seed_azimuth
 from .batch import simulate_sectors, stack_fields
 from .field import GridField
 from .forward import Simulation, simulate
 from .io.settings import Settings
 from .mount import Mount
+from .records import CorrectedRecords as CorrectedRecords
+from .records import correct_records as correct_records
+from .records import write_corrected_csv as write_corrected_csv
 
 __all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "correct_records",
            "write_corrected_csv", "CorrectedRecords", "SEED_U_REF"]
@@ -53,11 +55,12 @@ def seed_columns(sim: Simulation) -> dict[str, np.ndarray]:
     return {k: np.asarray(v, dtype=np.float64) for k, v in cols.items()}
 
 
-def settings_mounts(settings: Settings, betas: Sequence[float]) -> list[Mount]:
+def settings_mounts(settings: Settings, betas: Sequence[float], *, pitch: float = 0.0,
+                    roll: float = 0.0) -> list[Mount]:
     """The `Mount` of each platform rotation: the settings' location row for that beta and
-    its gamma, psi and epsilon."""
+    its gamma, psi and epsilon, with the installation's `pitch` and `roll` (degrees)."""
     return [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
-                  epsilon=settings.epsilon) for b in betas]
+                  epsilon=settings.epsilon, pitch=pitch, roll=roll) for b in betas]
 
 
 def simulate_settings(
@@ -68,6 +71,8 @@ def simulate_settings(
     *,
     u_ref=SEED_U_REF,
     probe=None,
+    pitch: float = 0.0,
+    roll: float = 0.0,
 ) -> dict[float, Simulation]:
     """Simulate the lidar of `settings` for each platform rotation in `betas`.
 
@@ -80,12 +85,13 @@ def simulate_settings(
     - `scan`: the `lidarjax.Scan`.
     - `u_ref`: free-stream vector in the CFD frame (m/s); default the seed UDF's.
     - `probe`: probe volume (default point).
+    - `pitch`, `roll`: the installation's tilt in degrees (`lidarjax.Mount`), default level.
 
     **Returns:** ``{beta: Simulation}``. Runs on one grid are simulated in one compiled,
     vmapped batch; otherwise one call per run (one compilation per distinct grid shape).
     """
     betas = [float(b) for b in betas]
-    mounts = settings_mounts(settings, betas)
+    mounts = settings_mounts(settings, betas, pitch=pitch, roll=roll)
     heights = jnp.asarray(settings.heights())
     fields = [field_for_beta(b) for b in betas]
     try:
@@ -107,6 +113,8 @@ def build_table(
     *,
     u_ref=SEED_U_REF,
     probe=None,
+    pitch: float = 0.0,
+    roll: float = 0.0,
     client=None,
     progress: bool = False,
 ):
@@ -129,6 +137,7 @@ def build_table(
       cloudpickle and read files the workers can see). The workers must use the caller's
       ``jax_enable_x64`` setting (checked: the command line sets it on them). The table is
       identical to the serial one.
+    - `pitch`, `roll`: the installation's tilt in degrees (`lidarjax.Mount`), default level.
     - `progress`: one line per finished run on stderr (run, beta, grid before and after the
       crop, seconds).
     """
@@ -137,9 +146,9 @@ def build_table(
     from .response import ResponseTable
 
     betas = [float(b) for b in betas]
-    mounts = settings_mounts(settings, betas)
+    mounts = settings_mounts(settings, betas, pitch=pitch, roll=roll)
     heights = np.asarray(settings.heights())
-    lo, hi = table_region(settings, betas, scan, probe=probe)
+    lo, hi = table_region(settings, betas, scan, probe=probe, pitch=pitch, roll=roll)
     u_ref = np.asarray(u_ref, np.float64)
     tasks = [(b, m) for b, m in zip(betas, mounts, strict=True)]
     run = _TableRun(field_for_beta, scan, heights, u_ref, probe, lo, hi)
@@ -174,13 +183,14 @@ def build_table(
     return table, sims
 
 
-def table_region(settings: Settings, betas: Sequence[float], scan, *, probe=None):
-    """``(lo, hi)`` absolute CFD metres: the box every mount of `settings` at `betas` samples
-    (`lidarjax.scan_bounds` of all of them with the probe and the point reference); the
-    region to load from each CFD run."""
+def table_region(settings: Settings, betas: Sequence[float], scan, *, probe=None,
+                 pitch: float = 0.0, roll: float = 0.0):
+    """``(lo, hi)`` absolute CFD metres: the box every mount of `settings` at `betas` (with
+    the installation's `pitch` and `roll`, degrees) samples (`lidarjax.scan_bounds` of all of
+    them with the probe and the point reference); the region to load from each CFD run."""
     from .footprint import scan_bounds
 
-    mounts = settings_mounts(settings, [float(b) for b in betas])
+    mounts = settings_mounts(settings, [float(b) for b in betas], pitch=pitch, roll=roll)
     return scan_bounds(scan, mounts, np.asarray(settings.heights()), probe=probe)
 
 
@@ -208,168 +218,3 @@ class _TableRun:
         del field
         sim = jax.tree_util.tree_map(np.asarray, sim)
         return beta, sim, {"shape": shape, "crop": crop, "seconds": time.perf_counter() - t0}
-
-
-@dataclasses.dataclass(frozen=True)
-class CorrectedRecords:
-    """Corrected records (`correct_records`); arrays ``(r, h)`` unless noted.
-
-    - `kind`: 'sta', 'rtd' or 'zephir'; `time` ``(r,)`` datetime64 (end of interval);
-      `heights` ``(h,)`` m above the lidar (the table's);
-    - `speed`, `direction`: free-stream horizontal speed (m/s) and meteorological direction
-      (degrees), NaN where not converged; `speed_std`, `direction_std`: one-sigma;
-    - `converged`, `flags` (`lidarjax.InverseFlag` bits);
-    - `measured_speed`, `measured_direction`: what the instrument reported (for raw LOS
-      records, the homogeneous-flow reconstruction).
-    """
-
-    kind: str
-    time: np.ndarray
-    heights: np.ndarray
-    speed: np.ndarray
-    direction: np.ndarray
-    speed_std: np.ndarray
-    direction_std: np.ndarray
-    converged: np.ndarray
-    flags: np.ndarray
-    measured_speed: np.ndarray
-    measured_direction: np.ndarray
-
-
-def _match_heights(table_heights, record_heights, path) -> np.ndarray:
-    if table_heights is None:
-        raise ValueError("the response table has no heights; rebuild it with lidarjax table")
-    th = np.asarray(table_heights, np.float64)
-    rh = np.asarray(record_heights, np.float64)
-    idx = np.array([int(np.argmin(np.abs(rh - h))) for h in th])
-    bad = [f"{h:g}" for h, i in zip(th, idx, strict=True) if abs(rh[i] - h) > 0.5]
-    if bad:
-        raise ValueError(
-            f"{path}: the table's heights {', '.join(bad)} m are not among the record's "
-            f"heights {', '.join(f'{h:g}' for h in rh)} m; build the table at the record's heights")
-    return idx
-
-
-def _chunks(n: int, size: int, progress: bool, label: str):
-    starts = range(0, n, size)
-    if not progress:
-        return starts
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return _text_progress(starts, n, size, label)
-    return tqdm(starts, total=len(starts), desc=label, unit="chunk")
-
-
-def _text_progress(starts, n, size, label):
-    import sys
-
-    for s in starts:
-        yield s
-        done = min(n, s + size)
-        print(f"\r{label}: {done}/{n} records", end="" if done < n else "\n", file=sys.stderr)
-
-
-def correct_records(
-    table,
-    path,
-    *,
-    noise: float | None = None,
-    chunk_records: int = 4096,
-    progress: bool = False,
-) -> CorrectedRecords:
-    """Read a record file and invert every record and height with `table`.
-
-    - ``.sta`` / ``.stdsta`` (Windcube statistics): `lidarjax.invert_reconstructed` on the
-      reported speed and direction (`noise` is then the component noise, m/s);
-    - ``.rtd`` (Windcube real-time LOS): 10-minute beam means, then `lidarjax.invert` on the
-      raw LOS (beams 0, 90, 180, 270 and the vertical, as many as the table has);
-    - ``.csv`` (ZephIR 10-minute export): `invert_reconstructed`.
-
-    The table's heights must be among the record's (within 0.5 m). Records are processed in
-    chunks of `chunk_records` (one compiled shape; the last chunk is padded), with a progress
-    bar when asked (tqdm if installed). Bad records come back NaN, never an exception.
-    """
-    from pathlib import Path
-
-    from .inverse import invert, invert_reconstructed
-    from .io import group_rtd, read_rtd, read_sta, read_zephir_csv
-
-    p = Path(path)
-    suffix = p.suffix.lower()
-    reported = {".sta": ("sta", read_sta), ".stdsta": ("sta", read_sta),
-                ".csv": ("zephir", read_zephir_csv)}
-    if suffix in reported:  # the instrument's reconstructed speed and direction
-        kind, reader = reported[suffix]
-        rec = reader(p)
-        time, heights = rec.time, rec.heights
-        idx = _match_heights(table.heights, heights, p)
-        data = (rec.speed[:, idx], rec.direction[:, idx])
-        measured = data
-    elif suffix == ".rtd":
-        beams = group_rtd(read_rtd(p))
-        kind, time, heights = "rtd", beams.time, beams.heights
-        idx = _match_heights(table.heights, heights, p)
-        los = beams.los[:, idx, : table.n_beams]
-        data = (los,)
-        vectors = np.asarray(table.beam_vectors) if table.beam_vectors is not None else None
-        if vectors is not None:
-            homog = np.einsum("kb,rhb->rhk", np.linalg.pinv(vectors), np.nan_to_num(los))
-            homog[np.isnan(los).any(-1)] = np.nan
-        else:
-            homog = np.full(los.shape[:-1] + (3,), np.nan)
-        measured = (np.asarray(horizontal_speed(homog)), np.asarray(wind_direction(homog)))
-    else:
-        raise ValueError(f"{p}: unknown record format {suffix!r}; expected .sta, .stdsta, .rtd "
-                         "or a ZephIR .csv")
-    n = len(time)
-    dtype = np.asarray(table.response).dtype
-    out = {k: [] for k in ("speed", "direction", "speed_std", "direction_std", "converged",
-                           "flags")}
-    size = max(1, min(chunk_records, n))
-    for s in _chunks(n, size, progress, f"correcting {p.name}"):
-        part = [np.asarray(a[s:s + size], dtype) for a in data]
-        m = part[0].shape[0]
-        if m < size:  # pad to the compiled shape with NaN records
-            part = [np.concatenate([a, np.full((size - m,) + a.shape[1:], np.nan, dtype)])
-                    for a in part]
-        if kind == "rtd":
-            inv = invert(table, part[0], noise=noise)
-        else:
-            inv = invert_reconstructed(table, part[0], part[1], noise=noise)
-        for k in out:
-            out[k].append(np.asarray(getattr(inv, k))[:m])
-    res = {k: np.concatenate(v) if v else np.zeros((0, len(idx))) for k, v in out.items()}
-    return CorrectedRecords(kind=kind, time=np.asarray(time),
-                            heights=np.asarray(table.heights, np.float64),
-                            measured_speed=np.asarray(measured[0], np.float64),
-                            measured_direction=np.asarray(measured[1], np.float64), **res)
-
-
-def write_corrected_csv(path, corrected: CorrectedRecords, metadata: dict | None = None):
-    """Write corrected records as a long CSV (one row per record and height), atomically.
-
-    Header comment lines carry `metadata`; columns: time (ISO 8601, end of interval),
-    height [m], speed [m/s], direction [deg, meteorological], speed_std [m/s],
-    direction_std [deg], converged [bool], flags [InverseFlag bits], measured_speed [m/s],
-    measured_direction [deg].
-    """
-    from .io._common import atomic_write_text
-
-    lines = [f"# {k}: {v}" for k, v in (metadata or {}).items()]
-    lines.append("time,height [m],speed [m/s],direction [deg],speed_std [m/s],"
-                 "direction_std [deg],converged,flags,measured_speed [m/s],"
-                 "measured_direction [deg]")
-    c = corrected
-
-    def f(v):
-        return "nan" if not np.isfinite(v) else f"{v:.6g}"
-
-    for i, t in enumerate(c.time):
-        ts = str(np.datetime64(t, "s"))
-        for j, h in enumerate(c.heights):
-            lines.append(",".join([
-                ts, f"{h:g}", f(c.speed[i, j]), f(c.direction[i, j]), f(c.speed_std[i, j]),
-                f(c.direction_std[i, j]), str(bool(c.converged[i, j])), str(int(c.flags[i, j])),
-                f(c.measured_speed[i, j]), f(c.measured_direction[i, j])]))
-    return atomic_write_text(path, "\n".join(lines) + "\n")

@@ -11,3 +11,4 @@ jax.config.update("jax_enable_x64", True)
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("dev", deadline=None, print_blob=True)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
+os.environ.setdefault("LIDARJAX_NO_CACHE", "1")  # in-process CLI tests leave ~/.cache alone

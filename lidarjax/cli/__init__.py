@@ -12,19 +12,28 @@ import sys
 
 from . import correct, demo, farm, probes, series, simulate, table
 from . import sensitivity as sensitivity_cmd
-from ._common import enable_x64
+from ._common import (
+    OneLineParser,
+    Terminated,
+    enable_x64,
+    install_signal_handlers,
+    setup_compilation_cache,
+)
 
 #: The command modules, in the order `--help` lists them.
 COMMANDS = (demo, simulate, table, correct, probes, sensitivity_cmd, series, farm)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="lidarjax",
         description="Simulate wind lidars in CFD fields and correct their records.",
     )
     parser.add_argument("--x64", action=argparse.BooleanOptionalAction, default=True,
                         help="compute in float64 (default) or float32 (--no-x64)")
+    parser.add_argument("--no-cache", action="store_true",
+                        help="do not use the persistent compilation cache (default: on, in "
+                             "$XDG_CACHE_HOME/lidarjax/jax; also off with LIDARJAX_NO_CACHE=1)")
     sub = parser.add_subparsers(dest="command", required=True)
     for command in COMMANDS:
         command.register(sub)
@@ -33,13 +42,31 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # usage error (one line, exit 2) or --help (exit 0)
+        return int(done.code or 0)
     enable_x64(args)
+    setup_compilation_cache(args)
+    restore = install_signal_handlers()
     try:
         return args.func(args)
     except (ValueError, FileNotFoundError) as err:
         print(f"lidarjax {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except (OSError, ImportError) as err:  # permissions, full disk, a missing optional extra
+        print(f"lidarjax {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"\nlidarjax {args.command}: interrupted; no output file was left half-written",
+              file=sys.stderr)
+        return 130
+    except Terminated:
+        print(f"lidarjax {args.command}: terminated; no output file was left half-written",
+              file=sys.stderr)
+        return 143
+    finally:
+        restore()
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,8 +1,27 @@
-"""Arguments and helpers shared by the `lidarjax` commands."""
+"""Arguments and helpers shared by the `lidarjax` commands.
+
+Besides the shared arguments this module holds the command line's file discipline:
+
+- `check_output_file` / `check_output_folder`: called by every command *before* it computes
+  anything. An output may not be one of the command's inputs (paths are compared after
+  resolving symbolic links, and by inode when both exist); its folder must exist and accept
+  a new file (checked by creating and removing a probe file, which also catches read-only
+  file systems when running as root); an output file may not be a folder, and an existing
+  output is replaced only if it is a regular, writable file. Replacing is atomic (a
+  temporary file beside it, then `os.replace`), so the previous version survives until the
+  new one is complete.
+- `install_signal_handlers`: SIGTERM raises `Terminated` (a `BaseException`) so that the
+  atomic writers remove their temporary file on the way out.
+- `setup_compilation_cache`: JAX's persistent compilation cache in a user folder.
+- argparse types that validate numbers (finite, positive) at parse time.
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
+import os
+from pathlib import Path
 
 SCAN_CHOICES = ("windcube_v1", "windcube_v2", "zephir")
 
@@ -13,13 +32,214 @@ def enable_x64(args) -> None:
     jax.config.update("jax_enable_x64", bool(args.x64))
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An `ArgumentParser` whose usage errors are one line on stderr (exit 2)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class Terminated(BaseException):  # noqa: N818 - named like KeyboardInterrupt
+    """Raised in the main thread when the process receives SIGTERM."""
+
+
+def install_signal_handlers():
+    """SIGTERM -> `Terminated`, so `finally` blocks and atomic writers clean up.
+
+    Returns a function that restores the previous handler (the command line calls it on
+    the way out, so an in-process caller keeps its own handler)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def _terminate(signum, frame):
+        raise Terminated(signum)
+
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    return lambda: signal.signal(signal.SIGTERM, previous)
+
+
+def cache_folder() -> Path:
+    """The persistent compilation cache folder: ``$XDG_CACHE_HOME/lidarjax/jax`` (default
+    ``~/.cache/lidarjax/jax``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "lidarjax" / "jax"
+
+
+def setup_compilation_cache(args) -> Path | None:
+    """Turn on JAX's persistent compilation cache for this command-line process.
+
+    Off with ``--no-cache`` or the environment variable ``LIDARJAX_NO_CACHE=1``. Only the
+    command line does this; importing `lidarjax` never changes JAX's configuration. A folder
+    that cannot be created just means no cache (never an error). Returns the folder or None.
+    """
+    if getattr(args, "no_cache", False) or os.environ.get("LIDARJAX_NO_CACHE", "") not in ("",
+                                                                                          "0"):
+        return None
+    folder = cache_folder()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return folder
+
+
+# ------------------------------------------------------------------------------------------
+# numbers
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite float."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite float > 0."""
+    value = finite_float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def tilt_angle(text: str) -> float:
+    """argparse type: a finite angle in [-90, 90] degrees."""
+    value = finite_float(text)
+    if not -90.0 <= value <= 90.0:
+        raise argparse.ArgumentTypeError(f"expected an angle in [-90, 90] degrees, got {text!r}")
+    return value
+
+
+def height_list(text: str) -> tuple[float, ...]:
+    """argparse type: comma-separated heights in metres, finite, positive, increasing."""
+    try:
+        values = tuple(float(v) for v in text.replace(" ", "").split(",") if v != "")
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected heights in metres separated by commas (e.g. 40,54,74), got {text!r}"
+        ) from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"expected at least one height, got {text!r}")
+    if not all(math.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"heights must be finite and > 0 m, got {text!r}")
+    if any(b <= a for a, b in zip(values, values[1:], strict=False)):
+        raise argparse.ArgumentTypeError(f"heights must be strictly increasing, got {text!r}")
+    return values
+
+
+# ------------------------------------------------------------------------------------------
+# files
+
+
+def _same_path(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def _refuse_inputs(out: Path, inputs, option: str) -> None:
+    for name, path in inputs:
+        if path is not None and _same_path(out, Path(path)):
+            raise ValueError(f"{option} {out} is the same file as the input {name} {path}; "
+                             "choose another output path (inputs are never overwritten)")
+
+
+def _probe_folder(folder: Path, option: str) -> None:
+    import tempfile
+
+    if not folder.exists():
+        raise FileNotFoundError(f"{option}: output folder not found: {folder}")
+    if not folder.is_dir():
+        raise ValueError(f"{option}: {folder} is not a folder")
+    try:
+        fd, name = tempfile.mkstemp(prefix=".lidarjax-write-test-", dir=folder)
+    except OSError as err:
+        raise ValueError(f"{option}: cannot write into the folder {folder} "
+                         f"({err.strerror or err}); choose a writable folder") from None
+    os.close(fd)
+    os.unlink(name)
+
+
+def check_output_file(path, *, inputs=(), option: str = "--out") -> Path:
+    """Check before computing that `path` can be written as a new or replaced file.
+
+    `inputs` is a sequence of ``(name, path)`` the command reads. Raises `ValueError` (or
+    `FileNotFoundError` for a missing folder) with one line naming the fix.
+    """
+    out = Path(path)
+    if str(path).endswith(os.sep) or out.is_dir():
+        raise ValueError(f"{option} {path} is a folder; give a file name, e.g. "
+                         f"{out / 'output'}")
+    _refuse_inputs(out, inputs, option)
+    if out.exists() or out.is_symlink():
+        if not out.is_file():
+            raise ValueError(f"{option} {out} exists and is not a regular file; choose "
+                             "another output path")
+        if not os.access(out, os.W_OK) or not (out.stat().st_mode & 0o222):
+            raise ValueError(f"{option} {out} exists and is read-only; remove it or choose "
+                             "another output path")
+    _probe_folder(out.parent if str(out.parent) else Path("."), option)
+    return out
+
+
+def check_output_folder(path, *, files=(), inputs=(), option: str = "--out") -> Path:
+    """Check before computing that the folder `path` can be created or written, and that
+    none of the file names `files` written inside it is an input or a folder."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{option} {out} is an existing file, not a folder; give a folder "
+                         "name (it is created when missing)")
+    parent = out
+    while not parent.exists():
+        parent = parent.parent if str(parent.parent) != str(parent) else Path(".")
+        if str(parent) in ("", "."):
+            parent = Path(".")
+            break
+    if not parent.is_dir():
+        raise ValueError(f"{option} {out}: {parent} is a file, so the folder cannot be created")
+    _probe_folder(parent, option)
+    for name in files:
+        check = out / name
+        _refuse_inputs(check, inputs, option)
+        if check.is_dir():
+            raise ValueError(f"{option}: {check} is a folder, expected an output file name "
+                             "there; move it away")
+    return out
+
+
 def add_run_arguments(parser, *, default_scan: str) -> None:
     """CFD runs, scan, free stream and probe: shared by `simulate` and `table`."""
     parser.add_argument("--field", required=True,
                         help="CFD field file (.npz, .nc or Fluent ASCII); '{beta}' is replaced "
                              "by each platform rotation, e.g. 'runs/platform_{beta}.npz'")
     parser.add_argument("--scan", choices=SCAN_CHOICES, default=default_scan)
-    parser.add_argument("--cone-angle", type=float, default=None,
+    parser.add_argument("--cone-angle", type=positive_float, default=None,
                         help="cone angle in degrees (default: the scan's, 30 / 28 / 30)")
     parser.add_argument("--u-ref", type=vector, default=(-15.0, 0.0, 0.0),
                         help="free stream u,v,w in the CFD frame, m/s (default: the seed "
@@ -27,13 +247,26 @@ def add_run_arguments(parser, *, default_scan: str) -> None:
     add_probe_arguments(parser)
 
 
+def add_tilt_arguments(parser) -> None:
+    """--pitch, --roll, --tilt-compensation (`simulate`, `table`; other commands that define
+    their own tilt options do not call this)."""
+    parser.add_argument("--pitch", type=tilt_angle, default=0.0,
+                        help="installation pitch in degrees (lidarjax.Mount; positive raises the "
+                             "S0 side; -90 is a forward-looking nacelle lidar). Default level")
+    parser.add_argument("--roll", type=tilt_angle, default=0.0,
+                        help="installation roll in degrees (positive lowers the S1 side)")
+    parser.add_argument("--tilt-compensation", action="store_true",
+                        help="the instrument knows its tilt and reconstructs with the level "
+                             "beam directions (default: it believes it is level)")
+
+
 def add_probe_arguments(parser) -> None:
     parser.add_argument("--probe", choices=("point", "pulsed", "cw"), default="point",
                         help="probe volume: point (default), pulsed (Windcube: Gaussian pulse * "
                              "range gate) or cw (ZephIR: Lorentzian)")
-    parser.add_argument("--probe-nodes", type=int, default=None,
+    parser.add_argument("--probe-nodes", type=positive_int, default=None,
                         help="quadrature nodes along the beam (default 9 pulsed, 17 cw)")
-    parser.add_argument("--probe-scale", type=float, default=1.0,
+    parser.add_argument("--probe-scale", type=positive_float, default=None,
                         help="model scale s of the CFD (1:s); probe lengths are divided by s "
                              "(e.g. 100 for a 1:100 wind-tunnel-scale platform)")
 
@@ -41,15 +274,21 @@ def add_probe_arguments(parser) -> None:
 def make_probe(args):
     from ..probe import CWProbe, PulsedProbe
 
-    if args.probe_scale <= 0:
-        raise ValueError(f"--probe-scale must be positive, got {args.probe_scale}")
+    scale = 1.0 if args.probe_scale is None else args.probe_scale
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"--probe-scale must be a finite positive number, got {scale}")
     if args.probe_nodes is not None and args.probe_nodes < 1:
         raise ValueError(f"--probe-nodes must be at least 1, got {args.probe_nodes}")
     if args.probe == "point":
+        for opt, value in (("--probe-nodes", args.probe_nodes),
+                           ("--probe-scale", args.probe_scale)):
+            if value is not None:
+                raise ValueError(f"{opt} applies to a probe volume, but --probe is point; "
+                                 "add --probe pulsed or --probe cw, or drop it")
         return None
     kind = PulsedProbe if args.probe == "pulsed" else CWProbe
     probe = kind() if args.probe_nodes is None else kind(n_nodes=args.probe_nodes)
-    return probe.scaled(args.probe_scale) if args.probe_scale != 1.0 else probe
+    return probe.scaled(scale) if scale != 1.0 else probe
 
 
 def vector(text: str) -> tuple[float, float, float]:
@@ -59,20 +298,50 @@ def vector(text: str) -> tuple[float, float, float]:
         raise argparse.ArgumentTypeError(f"expected three numbers 'u,v,w', got {text!r}") from None
     if len(values) != 3:
         raise argparse.ArgumentTypeError(f"expected three numbers 'u,v,w', got {text!r}")
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected three finite numbers 'u,v,w', got {text!r}")
+    if math.hypot(values[0], values[1]) == 0.0:
+        raise argparse.ArgumentTypeError(
+            f"the free stream must have a horizontal component (its direction defines the "
+            f"table), got {text!r}")
     return values
 
 
-def make_scan(name: str, cone: float | None):
+def make_scan(name: str, cone: float | None, *, tilt_compensation: bool = False):
     from .. import scan as scans
 
     make = getattr(scans, name)
-    return make() if cone is None else make(cone)
+    if cone is None:
+        return make(tilt_compensation=tilt_compensation)
+    return make(cone, tilt_compensation=tilt_compensation)
 
 
 def selected_betas(args, settings) -> list[float]:
     if getattr(args, "all", False):
         return [float(b) for b in settings.betas]
     return [float(settings.beta if args.beta is None else args.beta)]
+
+
+def field_pattern(pattern: str, beta: str) -> str:
+    """`pattern` with ``{beta}`` replaced; any other brace field is an error naming the fix.
+
+    Literal braces are written ``{{`` and ``}}``.
+    """
+    import string
+
+    try:
+        fields = [f for _, f, _, _ in string.Formatter().parse(pattern) if f is not None]
+    except ValueError as err:
+        raise ValueError(f"--field {pattern!r}: {err}; write a literal brace as '{{{{' or "
+                         "'}}}}'") from None
+    bad = [f for f in fields if f != "beta"]
+    if bad:
+        raise ValueError(f"--field {pattern!r}: unknown placeholder {{{bad[0]}}}; the only "
+                         "placeholder is {beta} (write a literal brace as '{{' or '}}')")
+    try:
+        return pattern.format(beta=beta)
+    except (ValueError, IndexError, KeyError) as err:
+        raise ValueError(f"--field {pattern!r}: {err}; write the placeholder as {{beta}}") from None
 
 
 def field_paths(args, betas):
@@ -83,7 +352,7 @@ def field_paths(args, betas):
     if len(betas) > 1 and "{beta}" not in args.field:
         raise ValueError(f"--field {args.field!r} must contain '{{beta}}' to name one CFD run "
                          "per platform rotation (e.g. 'runs/platform_{beta}.npz')")
-    paths = {b: Path(args.field.format(beta=format_number(b))) for b in betas}
+    paths = {b: Path(field_pattern(args.field, format_number(b))) for b in betas}
     missing = [str(p) for p in paths.values() if not p.is_file()]
     if missing:
         raise FileNotFoundError(f"CFD field file(s) not found: {', '.join(missing)}")

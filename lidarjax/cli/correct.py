@@ -2,45 +2,122 @@
 
 from __future__ import annotations
 
-import numpy as np
+from ._common import check_output_file, finite_float, positive_float
 
 
 def register(sub) -> None:
     cor = sub.add_parser(
         "correct", help="invert lidar records for the free-stream wind with a response table",
-        description="Read Windcube .sta/.rtd or ZephIR .csv records, invert every record and "
-                    "height with the table, and write corrected speed, direction, "
-                    "uncertainty and flags as CSV (written atomically).",
+        description="Read Windcube .sta/.rtd or ZephIR .csv records, check the instrument "
+                    "against the table, invert every record and height the table has, and "
+                    "write corrected speed, direction, uncertainty and flags as CSV and CF "
+                    "NetCDF, written atomically. Bad records "
+                    "come back NaN with a reason in the flags column.",
         epilog="example: lidarjax correct --table site_table.npz --records "
                "wls7_2020_10_07.sta --out corrected.csv")
     cor.add_argument("--table", required=True, help="response table from `lidarjax table`")
     cor.add_argument("--records", required=True, help=".sta, .stdsta, .rtd or ZephIR .csv")
-    cor.add_argument("--out", default=None, help="output CSV (default: <records>_corrected.csv)")
-    cor.add_argument("--noise", type=float, default=None,
+    cor.add_argument("--out", default=None, help="output CSV (default: <records>_corrected.csv); "
+                     "an existing file is replaced atomically, an input never")
+    cor.add_argument("--netcdf", default=None, help="CF NetCDF output (default: the CSV's name "
+                     "with .nc)")
+    cor.add_argument("--no-netcdf", action="store_true", help="write the CSV only")
+    cor.add_argument("--noise", type=positive_float, default=None,
                      help="noise standard deviation (m/s) for the uncertainties (default: "
-                          "estimated from spare beams; needed for .sta/.csv)")
-    cor.add_argument("--quiet", action="store_true", help="no progress bar")
+                          ".rtd from the spare beams; .sta/.csv from each record's dispersion "
+                          "and availability)")
+    cor.add_argument("--scan-period", type=positive_float, default=None,
+                     help="seconds per full scan, for the standard error of reported records "
+                          "(default: 5 Windcube V2, 6 V1, 3 ZephIR)")
+    cor.add_argument("--cnr-threshold", type=finite_float, default=None,
+                     help="CNR threshold in dB for .rtd samples (default: the file header's "
+                          "CNRThreshold)")
+    cor.add_argument("--min-availability", type=finite_float, default=None,
+                     help="records below this data availability (percent) are flagged and not "
+                          "used (default 80)")
+    cor.add_argument("--allow-mismatch", action="store_true",
+                     help="correct although the record header disagrees with the table (scan, "
+                          "cone angle, direction offset); the mismatch is printed")
+    cor.add_argument("--quiet", action="store_true", help="no progress lines")
     cor.set_defaults(func=run)
 
 
 def run(args) -> int:
+    import sys
+    import time
     from pathlib import Path
 
     from ..io import load_table
-    from ..workflow import correct_records, write_corrected_csv
+    from ..records import (
+        DEFAULT_MIN_AVAILABILITY,
+        check_instrument,
+        correct_records,
+        load_records,
+        quality_summary,
+        table_warnings,
+        write_corrected_csv,
+        write_corrected_netcdf,
+    )
 
-    table, meta = load_table(args.table, return_metadata=True)
+    def say(text):
+        print(f"lidarjax correct: {text}", file=sys.stderr)
+
     records = Path(args.records)
     if not records.is_file():
-        raise FileNotFoundError(f"record file not found: {records}")
+        raise FileNotFoundError(f"--records: record file not found: {records}")
+    if not Path(args.table).is_file():
+        raise FileNotFoundError(f"--table: table file not found: {args.table}")
+    min_avail = DEFAULT_MIN_AVAILABILITY if args.min_availability is None else \
+        args.min_availability
+    if not 0.0 <= min_avail <= 100.0:
+        raise ValueError(f"--min-availability must be a percentage in [0, 100], got {min_avail}")
+    inputs = [("--table", args.table), ("--records", records)]
     out = Path(args.out) if args.out else records.with_name(records.stem + "_corrected.csv")
-    if not out.parent.is_dir():
-        raise FileNotFoundError(f"output folder not found: {out.parent}")
-    result = correct_records(table, records, noise=args.noise, progress=not args.quiet)
-    write_corrected_csv(out, result, {"records": str(records), "table": str(args.table),
-                                      "scan": meta.get("scan", "?")})
-    ok = np.asarray(result.converged)
-    du = np.nanmedian(np.abs(result.speed - result.measured_speed))
-    print(f"corrected {ok.sum()} of {ok.size} record-heights ({len(result.time)} records x "
-          f"{len(result.heights)} heights); median |correction| {du:.3f} m/s -> {out}")
+    check_output_file(out, inputs=inputs)
+    nc = None
+    if not args.no_netcdf:
+        nc = Path(args.netcdf) if args.netcdf else out.with_suffix(".nc")
+        if nc.resolve() == out.resolve():
+            raise ValueError(f"--netcdf {nc} is the same file as the CSV output; name it .nc")
+        check_output_file(nc, inputs=inputs, option="--netcdf")
+    table, meta = load_table(args.table, return_metadata=True)
+    progress = not args.quiet
+    t0 = time.perf_counter()
+    rec = load_records(records, cnr_threshold=args.cnr_threshold, min_availability=min_avail,
+                       progress=progress)
+    if progress:
+        say(f"read {rec.time.size} records x {rec.heights.size} heights from {records} in "
+            f"{time.perf_counter() - t0:.1f} s")
+    mismatch = check_instrument(meta, table, rec)
+    if mismatch and not args.allow_mismatch:
+        raise ValueError(f"{records} does not match the table {args.table}: "
+                         f"{'; '.join(mismatch)} (rebuild the table for this instrument, or "
+                         "pass --allow-mismatch)")
+    for w in rec.warnings:  # after the refusals: a refused file gets one line
+        say(f"warning: {w}")
+    for w in table_warnings(meta):
+        say(f"warning: {w}")
+    for m in mismatch:
+        say(f"warning: mismatch allowed: {m}")
+    result = correct_records(table, records, records=rec, noise=args.noise,
+                             progress=progress, scan_period_s=args.scan_period)
+    if result.record_only_heights:
+        say("the table has no heights " + ", ".join(f"{h:g}" for h in result.record_only_heights)
+            + " m of the record; those are not corrected (lidarjax table --heights-from "
+            f"{records} covers them)")
+    if result.table_only_heights:
+        say("the record has no heights " + ", ".join(f"{h:g}" for h in result.table_only_heights)
+            + " m of the table; skipped")
+    info = {"records": str(records), "table": str(args.table), "scan": meta.get("scan", "?"),
+            "instrument": rec.instrument or "?", "time": "UTC, end of interval",
+            "noise": "given" if args.noise else ("record dispersion and availability"
+                                                 if rec.kind != "rtd" else "spare beams")}
+    write_corrected_csv(out, result, info, progress=progress)
+    written = [str(out)]
+    if nc is not None:
+        write_corrected_netcdf(nc, result, info)
+        written.append(str(nc))
+    for line in quality_summary(result):
+        print(line)
+    print(f"wrote {' and '.join(written)}")
     return 0

@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
-from ._common import add_run_arguments, field_paths, make_probe, make_scan
+from ._common import (
+    add_run_arguments,
+    add_tilt_arguments,
+    check_output_file,
+    field_paths,
+    height_list,
+    make_probe,
+    make_scan,
+)
 from ._dask import add_dask_arguments, dask_client, region_loader
 
 
@@ -11,41 +19,113 @@ def register(sub) -> None:
         "table", help="build a response table (for `correct`) from CFD runs over directions",
         description="Simulate the lidar of a seed settings.dat in every CFD run (one per "
                     "platform rotation beta, i.e. per inflow direction) and save the LOS "
-                    "per unit free-stream speed as a response table (.npz).",
+                    "per unit free-stream speed as a response table (.npz). The table records "
+                    "the instrument (scan, cone angle, beams), probe, mount, heights and CFD "
+                    "source, which `correct` checks against each record file's header.",
         epilog="example: lidarjax table settings.dat --field 'runs/platform_{beta}.npz' "
-               "--scan windcube_v2 --out site_table.npz")
+               "--scan windcube_v2 --heights-from wls7_2020_10_07.sta --out site_table.npz")
     tab.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
     add_run_arguments(tab, default_scan="windcube_v2")
-    tab.add_argument("--out", required=True, help="table file to write (.npz)")
+    add_tilt_arguments(tab)
+    heights = tab.add_mutually_exclusive_group()
+    heights.add_argument("--heights", type=height_list, default=None,
+                         help="measurement heights in m above the lidar, e.g. 40,54,74 "
+                              "(default: the settings file's)")
+    heights.add_argument("--heights-from", default=None, metavar="RECORDS",
+                         help="take the heights from a record file (.sta, .rtd or ZephIR .csv)")
+    tab.add_argument("--out", required=True, help="table file to write (.npz); an existing "
+                     "file is replaced atomically, an input never")
     add_dask_arguments(tab)
     tab.set_defaults(func=run)
 
 
+def _record_heights(path):
+    from pathlib import Path
+
+    from ..records import load_records
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"--heights-from: record file not found: {p}")
+    rec = load_records(p)
+    if rec.heights.size == 0:
+        raise ValueError(f"--heights-from {p}: the file lists no heights")
+    return rec
+
+
+def table_metadata(args, settings, scan, paths, heights) -> dict:
+    """The instrument facts `correct` checks, plus the CFD source."""
+    import os
+
+    import numpy as np
+
+    from .. import __version__
+
+    return {
+        "scan": args.scan, "scan_method": scan.method,
+        "cone_angle_deg": float(np.asarray(scan.cone_angle)),
+        "n_beams": int(scan.n_beams),
+        "beam_azimuths_deg": [float(a) for a in np.asarray(scan.azimuths)],
+        "vertical_beam": bool(scan.vertical),
+        "probe": args.probe, "probe_nodes": args.probe_nodes,
+        "probe_scale": 1.0 if args.probe_scale is None else args.probe_scale,
+        "gamma_deg": settings.gamma, "psi_deg": settings.psi, "epsilon_deg": settings.epsilon,
+        "pitch_deg": float(args.pitch), "roll_deg": float(args.roll),
+        "tilt_compensation": bool(args.tilt_compensation),
+        "heights_m": [float(h) for h in heights],
+        "settings": os.path.abspath(args.settings), "field": args.field,
+        "cfd_files": {f"{b:g}": os.path.abspath(p) for b, p in paths.items()},
+        "u_ref_cfd_m_s": list(args.u_ref),
+        "lidarjax_version": __version__,
+    }
+
 
 def run(args) -> int:
-    from pathlib import Path
+    import sys
+
+    import numpy as np
 
     from ..io import read_settings, save_table
     from ..io.fields import load_field
+    from ..records import check_instrument
     from ..workflow import build_table, table_region
 
     settings = read_settings(args.settings)
     betas = [float(b) for b in settings.betas]
     paths = field_paths(args, betas)
-    scan = make_scan(args.scan, args.cone_angle)
+    scan = make_scan(args.scan, args.cone_angle, tilt_compensation=args.tilt_compensation)
     probe = make_probe(args)
-    out = Path(args.out)
-    if not out.parent.is_dir():
-        raise FileNotFoundError(f"output folder not found: {out.parent}")
-    region = table_region(settings, betas, scan, probe=probe)
+    inputs = [("settings", args.settings)] + [(f"--field (beta {b:g})", p)
+                                               for b, p in paths.items()]
+    rec = None
+    if args.heights_from is not None:
+        inputs.append(("--heights-from", args.heights_from))
+    out = check_output_file(args.out, inputs=inputs)
+    if args.heights_from is not None:
+        rec = _record_heights(args.heights_from)
+        settings = settings.with_heights(rec.heights)
+    elif args.heights is not None:
+        settings = settings.with_heights(args.heights)
+    meta = table_metadata(args, settings, scan, paths, settings.heights())
+    if rec is not None:
+        bad = check_instrument(meta, None, rec)
+        if bad:
+            raise ValueError(f"--heights-from {args.heights_from}: the record does not match "
+                             f"the table being built: {'; '.join(bad)}")
+    # one run at a time, each read only where the beams look (peak memory about one run)
+    region = table_region(settings, betas, scan, probe=probe, pitch=args.pitch, roll=args.roll)
+    print(f"simulating {len(betas)} CFD runs x {settings.nh} heights ({args.scan}, "
+          f"{args.probe} probe) ...", file=sys.stderr)
     with dask_client(args) as client:
         table, _ = build_table(settings, betas, region_loader(load_field, paths, region), scan,
-                               u_ref=args.u_ref, probe=probe, client=client, progress=True)
-    meta = {"settings": str(args.settings), "field": args.field, "scan": args.scan,
-            "cone_angle_deg": float(scan.cone_angle), "probe": args.probe,
-            "gamma_deg": settings.gamma, "psi_deg": settings.psi,
-            "epsilon_deg": settings.epsilon, "u_ref_cfd_m_s": list(args.u_ref)}
+                               u_ref=args.u_ref, probe=probe, pitch=args.pitch, roll=args.roll,
+                               client=client, progress=True)
     save_table(out, table, meta)
+    bad = np.isnan(np.asarray(table.response)).all(axis=0)
+    note = ""
+    if bad.any():
+        note = (f"; {int(bad.sum())} height-beams are outside the CFD grid or in a solid "
+                "for every run (missing beams)")
     print(f"response table: {table.n_directions} directions x {table.n_heights} heights x "
-          f"{table.n_beams} beams -> {out}")
+          f"{table.n_beams} beams -> {out}{note}")
     return 0

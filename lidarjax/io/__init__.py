@@ -18,6 +18,9 @@ Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/wr
 without it.
 """
 
+from ._common import BLOCKING_FLAGS as BLOCKING_FLAGS
+from ._common import MIN_AVAILABILITY as MIN_AVAILABILITY
+from ._common import RecordFlag as RecordFlag
 from .fields import FieldArrays as FieldArrays
 from .fields import FieldLoadReport as FieldLoadReport
 from .fields import load_field as load_field
@@ -47,9 +50,11 @@ from .probes import write_openfoam_probes as write_openfoam_probes
 from .probes import write_probe_csv as write_probe_csv
 from .probes import write_zcfd_probes as write_zcfd_probes
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
+from .rtd import InstrumentReconstruction as InstrumentReconstruction
 from .rtd import RtdBeams as RtdBeams
 from .rtd import RtdRecord as RtdRecord
 from .rtd import group_rtd as group_rtd
+from .rtd import instrument_reconstruction as instrument_reconstruction
 from .rtd import read_rtd as read_rtd
 from .seed_output import SEED_COLUMNS as SEED_COLUMNS
 from .seed_output import SEED_UNITS as SEED_UNITS

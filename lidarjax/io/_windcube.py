@@ -1,18 +1,28 @@
 """The Windcube text layout shared by `.sta`/`.stdsta` and `.rtd` files (private).
 
+V2 / V2.1 (WindCube v2, firmware WF 2.x):
+
 ```
-HeaderSize=40                      <- V2; V1 writes HeaderLength=N
-Version=WF 2.1.6.16036             <- N header lines follow: key=value, section titles,
-...                                   '****' rules
+HeaderSize=40                      <- N header lines follow: key=value, section titles,
+Version=WF 2.1.6.16036                '****' rules
+timezone=UTC+0                     <- instrument clock; 'UTC--3' means UTC-3
+...
+CNRThreshold=-24                   <- dB; samples below it are not used by the instrument
 Altitudes (m)=\t40\t54\t...        <- tab-separated altitudes
-********************               <- may close the header
+********************
 Timestamp (end of interval)\tInt Temp (°C)\t...\t40m Wind Speed (m/s)\t...
-2020/10/07 00:10\t11.90\t...       <- data rows, tab separated
+2020/10/07 00:10\t11.90\t...       <- data rows, tab separated, trailing tab
 ```
 
-Encoding cp1252 (the degree sign is byte 0xB0). Per-altitude columns are named
-`<altitude>m <quantity> (<unit>)`; they are mapped by parsing the altitude and the
-normalised quantity name, never by position.
+V1 (WLS7 v1): first line `HeaderLength=N`, `Altitudes(m)=` in the header, a column line
+starting with `Date`, day-first stamps `dd/mm/yyyy hh:mm:ss` and per-altitude columns
+numbered by gate: `Vhm1`, `dVh1`, `Azim1`, `wm1`, `CNRm1`, `Avail1` ... where gate `i` is
+the `i`-th header altitude.
+
+Encoding cp1252 (the degree sign is byte 0xB0); UTF-8 is accepted. Per-altitude columns are
+mapped by parsing the altitude (or gate) and the normalised quantity name, never by
+position. Rows are parsed in vectorised chunks (`numpy.loadtxt`); a chunk with a bad row
+falls back to row-by-row parsing so that one corrupt row costs only itself.
 """
 
 from __future__ import annotations
@@ -20,12 +30,24 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import re
-from collections.abc import Mapping
+import warnings
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
 
-from ._common import file_error, normalise_key, parse_float, parse_row, require_file
+from ._common import (
+    RecordFlag,
+    file_error,
+    normalise_key,
+    offset_timedelta,
+    parse_float,
+    parse_times,
+    parse_utc_offset,
+    read_text,
+    require_file,
+    summarise_lines,
+)
 
 __all__: list[str] = []
 
@@ -45,9 +67,19 @@ TIME_FORMATS: tuple[str, ...] = (
     "%Y-%m-%dT%H:%M:%S.%f",
 )
 
+NOMINAL_CONE: dict[str, float] = {"windcube_v1": 30.0, "windcube_v2": 28.0}
+"""Cone angle (degrees from vertical) of each Windcube generation, used when the header's
+`ScanAngle` is `NA` (V2 firmware writes NA; the real V2.1 `.rtd` reconstruction pins 28.00
+degrees, see `lidarjax.io.rtd.instrument_reconstruction`)."""
+
 _FIRST_LINE = re.compile(r"^\s*(HeaderSize|HeaderLength)\s*=\s*(\d+)\s*$", re.IGNORECASE)
 _ALTITUDE_COLUMN = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*m(?![a-z])\s*(.*)$", re.IGNORECASE)
-_TIME_NAMES = ("timestamp", "date", "time", "datetime", "dateandtime", "timeanddate")
+_GATE_COLUMN = re.compile(r"^\s*([A-Za-z][A-Za-z_]*?)(\d+)\s*$")
+_TIME_NAMES = ("timestamp", "date", "time", "datetime", "dateandtime", "timeanddate",
+               "timestampendofinterval")
+_DATE_ONLY = re.compile(r"^\s*\d{1,4}[/.-]\d{1,2}[/.-]\d{1,4}\s*$")
+_TIME_ONLY = re.compile(r"^\s*\d{1,2}:\d{2}(:\d{2}(\.\d+)?)?\s*$")
+CHUNK = 4096
 
 
 class TimeParser:
@@ -70,7 +102,8 @@ class TimeParser:
 
 
 def _is_time_name(name: str) -> bool:
-    return normalise_key(name) in _TIME_NAMES
+    key = normalise_key(name)
+    return key in _TIME_NAMES or key.startswith("timestamp")
 
 
 @dataclasses.dataclass
@@ -78,15 +111,20 @@ class Parsed:
     """What `read_windcube` found; the public readers turn it into a record."""
 
     path: Path
-    version: str
+    version: str  # "V1" (HeaderLength=) or "V2" (HeaderSize=)
     header: dict[str, str]
     heights: np.ndarray  # (k,)
-    time: list[_dt.datetime]
+    time: np.ndarray  # (t,) datetime64[ms], as written (instrument clock)
+    time_ok: np.ndarray  # (t,) bool: the stamp was read
+    row_ok: np.ndarray  # (t,) bool: every value was read
     quantities: dict[str, np.ndarray]  # mapped quantity -> (t, k)
     extra: dict[str, np.ndarray]  # unmapped per-altitude quantity -> (t, k)
     scalars: dict[str, list[str]]  # other columns -> raw text per row
     scalar_lines: int  # 1-based line of the column names (for messages)
-    row_lines: list[int]  # 1-based line of each data row
+    row_lines: np.ndarray  # (t,) 1-based line of each data row
+    problems: list[tuple[int, str]]  # (line, why) of each corrupt row
+    notes: list[str]  # other remarks (duplicate columns ...)
+    columns: list[str]
 
 
 def header_lookup(header: Mapping[str, str], *names: str) -> str | None:
@@ -99,7 +137,7 @@ def header_lookup(header: Mapping[str, str], *names: str) -> str | None:
 
 
 def header_angle(header: Mapping[str, str], path: Path, *names: str) -> float:
-    """A header angle in degrees; NaN when absent or `NA`."""
+    """A header number (degrees, dB ...); NaN when absent or `NA`."""
     value = header_lookup(header, *names)
     if value is None:
         return float("nan")
@@ -111,163 +149,317 @@ def header_angle(header: Mapping[str, str], path: Path, *names: str) -> float:
         ) from None
 
 
-def read_windcube(path: str | Path, quantities: Mapping[str, str], what: str) -> Parsed:
-    """Stream a Windcube text file; per-altitude columns named in `quantities` are mapped.
+def _unique(columns: list[str], notes: list[str], path: Path, line: int) -> list[str]:
+    """Rename repeated column names `name#2`, `name#3` ... so that none collapses."""
+    seen: dict[str, int] = {}
+    out = []
+    for name in columns:
+        key = name.strip()
+        if not key:
+            out.append(name)
+            continue
+        n = seen.get(key, 0) + 1
+        seen[key] = n
+        if n > 1:
+            new = f"{key}#{n}"
+            notes.append(f"{path}, line {line}: column {key!r} appears {n} times; the "
+                         f"repeat is kept as {new!r}")
+            out.append(new)
+        else:
+            out.append(name)
+    return out
 
-    `quantities` maps normalised quantity names (`normalise_key("Wind Speed (m/s)")`
-    is `"windspeed"`) to record field names.
+
+def _parse_block(lines: list[str], cols: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Values of `cols` for each line: `(values (n, c), ok (n,))`; bad rows are NaN."""
+    n = len(lines)
+    out = np.full((n, len(cols)), np.nan)
+    ok = np.ones(n, dtype=bool)
+    if not cols or n == 0:
+        return out, ok
+    fast = _pandas_block(lines, cols)
+    if fast is not None:
+        return fast, ok
+    for s in range(0, n, CHUNK):
+        part = lines[s:s + CHUNK]
+        try:
+            out[s:s + len(part)] = np.loadtxt(
+                part, delimiter="\t", usecols=cols, comments=None, dtype=np.float64, ndmin=2
+            )
+            continue
+        except (ValueError, IndexError):
+            pass
+        for i, line in enumerate(part):
+            fields = line.split("\t")
+            try:
+                out[s + i] = [parse_float(fields[c]) for c in cols]
+            except (ValueError, IndexError):
+                ok[s + i] = False
+    return out, ok
+
+
+def _pandas_block(lines: list[str], cols: list[int]) -> np.ndarray | None:
+    """pandas' C parser on a clean block (about 10x faster than `numpy.loadtxt`), when the
+    optional pandas is installed; None when it is not or when any cell is not a number (the
+    caller then isolates the bad rows chunk by chunk)."""
+    try:
+        import pandas as pd
+    except ImportError:
+        return None
+    import io
+
+    out = np.empty((len(lines), len(cols)))
+    step = 50_000  # bounded memory: one block of text at a time
+    for s in range(0, len(lines), step):
+        part = lines[s:s + step]
+        try:
+            buf = io.BytesIO("\n".join(part).encode("utf-8", errors="replace"))
+            df = pd.read_csv(
+                buf, sep="\t", header=None, usecols=cols, dtype=np.float64, engine="c",
+                na_values=["NA", "N/A", "NaN", "nan", ""], keep_default_na=False,
+                skip_blank_lines=False, quoting=3,
+            )
+        except (ValueError, TypeError, UnicodeError, pd.errors.ParserError):
+            return None
+        values = df[cols].to_numpy(dtype=np.float64)
+        if values.shape != (len(part), len(cols)):
+            return None
+        out[s:s + len(part)] = values
+    return out
+
+
+def read_windcube(
+    path: str | Path,
+    quantities: Mapping[str, str],
+    what: str,
+    *,
+    gate_quantities: Mapping[str, str] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Parsed:
+    """Read a Windcube text file; per-altitude columns named in `quantities` are mapped.
+
+    `quantities` maps normalised quantity names (`normalise_key("Wind Speed (m/s)")` is
+    `"windspeed"`) to record field names; `gate_quantities` maps lower-case V1 gate-column
+    prefixes (`"vhm"` for `Vhm1`) to field names. `progress(done, total)` is called per chunk.
     """
     p = require_file(path, what)
+    text = read_text(p)
+    lines = text.split("\n")
+    first = lines[0].rstrip("\r").lstrip("\ufeff")
+    m = _FIRST_LINE.match(first)
+    if not m:
+        raise file_error(
+            p, 1, "expected 'HeaderSize=N' (Windcube V2) or 'HeaderLength=N' (V1), "
+            f"found {first.strip()[:60]!r}; is this a Windcube {what.split()[-2]} file?"
+        )
+    version = "V2" if m.group(1).lower() == "headersize" else "V1"
     header: dict[str, str] = {}
     header_line_of: dict[str, int] = {}
-    with open(p, encoding=ENCODING, errors="replace", newline=None) as fh:
-        first = fh.readline()
-        m = _FIRST_LINE.match(first.rstrip("\r\n"))
-        if not m:
+    notes: list[str] = []
+    columns: list[str] | None = None
+    column_line = 0
+    for idx in range(1, len(lines)):
+        line = lines[idx].rstrip("\r")
+        stripped = line.strip()
+        if not stripped or set(stripped) <= {"*"}:
+            continue
+        if _is_time_name(line.split("\t", 1)[0]) and ("\t" in line or "=" not in line):
+            columns = line.split("\t")
+            column_line = idx + 1
+            break
+        if "=" in stripped:
+            key, _, value = stripped.partition("=")
+            header[key.strip()] = value.strip()
+            header_line_of[key.strip()] = idx + 1
+            continue
+        if idx > int(m.group(2)):
             raise file_error(
-                p, 1, "expected 'HeaderSize=N' (Windcube V2) or 'HeaderLength=N' (V1), "
-                f"found {first.strip()[:60]!r}"
+                p, idx + 1, "expected the column-names line starting with 'Timestamp' or "
+                f"'Date', found {stripped[:60]!r}"
             )
-        version = "V2" if m.group(1).lower() == "headersize" else "V1"
-        n_header = int(m.group(2))
-        number = 1
-        columns: list[str] | None = None
+    if columns is None:
+        raise file_error(
+            p, len(text.splitlines()), "no column-names line (starting with 'Timestamp' or 'Date') "
+            "after the header; the file is cut or is not a Windcube record"
+        )
+    columns = _unique(columns, notes, p, column_line)
 
-        def take_header_line(text: str, line_no: int) -> bool:
-            """Record a header line; True if it is the column-names line instead."""
-            stripped = text.strip()
-            if not stripped or set(stripped) <= {"*"}:
-                return False
-            if "=" in stripped:
-                key, _, value = stripped.partition("=")
-                header[key.strip()] = value.strip()
-                header_line_of[key.strip()] = line_no
-                return False
-            return _is_time_name(text.split("\t", 1)[0])
+    header_heights: list[float] | None = None
+    alt_names = ("Altitudes (m)", "Altitudes AGL (m)", "Altitude (m)", "Heights (m)")
+    alt_value = header_lookup(header, *alt_names)
+    if alt_value is not None:
+        wanted = {normalise_key(a) for a in alt_names}
+        alt_key = next(k for k in header if normalise_key(k) in wanted)
+        try:
+            header_heights = [float(a) for a in alt_value.replace(",", " ").split()]
+        except ValueError:
+            raise file_error(
+                p, header_line_of[alt_key], f"'{alt_key}': expected altitudes in metres, "
+                f"found {alt_value!r}"
+            ) from None
 
-        for _ in range(n_header):
-            raw = fh.readline()
-            if raw == "":
-                raise file_error(
-                    p, number, f"the header announced {n_header} lines but the file ends"
-                )
-            number += 1
-            line = raw.rstrip("\r\n")
-            if take_header_line(line, number):  # header shorter than announced
-                columns = line.split("\t")
-                break
-        while columns is None:
-            raw = fh.readline()
-            if raw == "":
-                raise file_error(p, number, "expected the column-names line; the file ends")
-            number += 1
-            line = raw.rstrip("\r\n")
-            if take_header_line(line, number):
-                columns = line.split("\t")
-            elif line.strip() and "=" not in line and set(line.strip()) - {"*"}:
-                raise file_error(
-                    p, number, "expected the column-names line starting with 'Timestamp' "
-                    f"or 'Date', found {line.strip()[:60]!r}"
-                )
-        column_line = number
+    data = [ln.rstrip("\r") for ln in lines[column_line:]]
+    del lines, text  # keep the peak memory to one copy of the rows
+    # V1 may split the stamp in two fields (date \t time) under one 'Date' name.
+    time_col = next(i for i, c in enumerate(columns) if _is_time_name(c))
+    first_row = next((ln for ln in data if ln.strip()), None)
+    if first_row is not None:
+        f = first_row.split("\t")
+        if (len(f) > time_col + 1 and _DATE_ONLY.match(f[time_col])
+                and _TIME_ONLY.match(f[time_col + 1])):
+            if len(columns) > time_col + 1 and _is_time_name(columns[time_col + 1]):
+                columns[time_col + 1] = "__time_of_day"  # 'Date' and 'Time' columns
+            else:  # one 'Date' name over two fields
+                columns = columns[: time_col + 1] + ["__time_of_day"] + columns[time_col + 1:]
 
-        # Heights: from the header when given, else from the columns.
-        header_heights: list[float] | None = None
-        alt_value = header_lookup(header, "Altitudes (m)")
-        if alt_value is not None:
-            alt_key = next(k for k in header if normalise_key(k) == "altitudes")
-            try:
-                header_heights = [float(a) for a in alt_value.split()]
-            except ValueError:
-                raise file_error(
-                    p, header_line_of[alt_key], f"'{alt_key}': expected altitudes in metres, "
-                    f"found {alt_value!r}"
-                ) from None
+    mapped: list[tuple[int, float, str]] = []  # (column, altitude, quantity key)
+    scalar_cols: dict[str, int] = {}
+    seen: dict[tuple[float, str], str] = {}
+    gate_cols: list[tuple[int, str, int]] = []
+    for i, name in enumerate(columns):
+        if i == time_col or name == "__time_of_day" or not name.strip():
+            continue
+        am = _ALTITUDE_COLUMN.match(name)
+        if am is None:
+            gm = _GATE_COLUMN.match(name)
+            if gm is not None and header_heights is not None:
+                gate_cols.append((i, gm.group(1), int(gm.group(2))))
+            scalar_cols[name.strip()] = i
+            continue
+        altitude = float(am.group(1))
+        dup = re.search(r"#(\d+)$", am.group(2))
+        key = normalise_key(am.group(2)[: dup.start()] if dup else am.group(2))
+        if dup:
+            key = f"{key}#{dup.group(1)}"
+        if not key:
+            raise file_error(p, column_line, f"column {name!r}: no quantity after the altitude")
+        if (altitude, key) in seen:
+            key = f"{key}#2"
+            notes.append(f"{p}, line {column_line}: columns {seen[(altitude, key[:-2])]!r} "
+                         f"and {name!r} give the same quantity at {am.group(1)} m; the "
+                         f"second is kept as extra[{key!r}]")
+        seen[(altitude, key)] = name
+        if header_heights is not None and altitude not in header_heights:
+            raise file_error(
+                p, column_line, f"column {name!r}: altitude {am.group(1)} m is not in the "
+                f"header's altitudes {' '.join(alt_value.split()) if alt_value else ''}"
+            )
+        mapped.append((i, altitude, key))
 
-        time_col = next((i for i, c in enumerate(columns) if _is_time_name(c)), None)
-        if time_col is None:
-            raise file_error(p, column_line, "no timestamp column ('Timestamp' or 'Date')")
-        mapped: list[tuple[int, float, str]] = []  # (column, altitude, quantity key)
-        scalar_cols: dict[str, int] = {}
-        seen: dict[tuple[float, str], str] = {}
-        for i, name in enumerate(columns):
-            if i == time_col or not name.strip():
+    # Gate-numbered (V1) columns: a prefix present for gates within 1..len(altitudes).
+    if gate_cols and header_heights is not None:
+        by_prefix: dict[str, list[tuple[int, int]]] = {}
+        for i, prefix, gate in gate_cols:
+            by_prefix.setdefault(prefix, []).append((i, gate))
+        n_alt = len(header_heights)
+        gq = {k.lower(): v for k, v in (gate_quantities or {}).items()}
+        for prefix, items in by_prefix.items():
+            gates = [g for _, g in items]
+            known = prefix.lower() in gq
+            if not all(1 <= g <= n_alt for g in gates) or len(set(gates)) != len(gates):
                 continue
-            am = _ALTITUDE_COLUMN.match(name)
-            if am is None:
-                scalar_cols[name.strip()] = i
+            if not known and len(items) < min(2, n_alt):
                 continue
-            altitude = float(am.group(1))
-            key = normalise_key(am.group(2))
-            if not key:
-                raise file_error(p, column_line, f"column {name!r}: no quantity after the altitude")
-            if (altitude, key) in seen:
-                raise file_error(
-                    p, column_line, f"columns {seen[(altitude, key)]!r} and {name!r} give the "
-                    "same quantity at the same altitude"
-                )
-            seen[(altitude, key)] = name
-            if header_heights is not None and altitude not in header_heights:
-                raise file_error(
-                    p, column_line, f"column {name!r}: altitude {am.group(1)} m is not in the "
-                    f"header's altitudes {' '.join(alt_value.split()) if alt_value else ''}"
-                )
-            mapped.append((i, altitude, key))
+            for i, gate in items:
+                key = f"v1:{prefix.lower()}"
+                mapped.append((i, header_heights[gate - 1], key))
+                scalar_cols.pop(columns[i].strip(), None)
 
-        altitudes = set(header_heights) if header_heights is not None else {a for _, a, _ in mapped}
-        heights = np.array(sorted(altitudes), dtype=np.float64)
-        value_cols = [i for i, _, _ in mapped]
-        value_names = [columns[i] for i in value_cols]
-        scalar_items = list(scalar_cols.items())
-        needed = max([time_col, *value_cols, *scalar_cols.values()]) + 1
+    if not mapped:
+        raise file_error(
+            p, column_line, "no per-altitude columns ('40m Wind Speed (m/s)' in V2, or "
+            "gate-numbered 'Vhm1' with 'Altitudes(m)=' in the header in V1)"
+        )
+    altitudes = set(header_heights) if header_heights is not None else {a for _, a, _ in mapped}
+    heights = np.array(sorted(altitudes), dtype=np.float64)
+    value_cols = [i for i, _, _ in mapped]
+    scalar_items = list(scalar_cols.items())
+    n_fields = len(columns)
+    needed = max([time_col, *value_cols, *scalar_cols.values()]) + 1
+    two_part_time = "__time_of_day" in columns
 
-        parse_time = TimeParser(TIME_FORMATS)
-        times: list[_dt.datetime] = []
-        row_lines: list[int] = []
-        rows: list[np.ndarray] = []
-        scalars: dict[str, list[str]] = {name: [] for name in scalar_cols}
-        for raw in fh:
-            number += 1
-            line = raw.rstrip("\r\n")
-            if not line.strip():
-                continue
-            fields = line.split("\t")
-            if len(fields) < needed:
-                raise file_error(
-                    p, number, f"expected at least {needed} tab-separated fields, "
-                    f"found {len(fields)}"
-                )
-            try:
-                times.append(parse_time(fields[time_col]))
-            except ValueError as err:
-                raise file_error(p, number, f"column {columns[time_col]!r}: {err}") from None
-            rows.append(parse_row(fields, value_cols, value_names, p, number))
-            for name, col in scalar_items:
-                scalars[name].append(fields[col].strip())
-            row_lines.append(number)
-
-    table = np.array(rows, dtype=np.float64).reshape(len(rows), len(value_cols))
+    # Data rows: drop blank lines, keep the 1-based line numbers.
+    row_lines = []
+    rows = []
+    for j, ln in enumerate(data):
+        if ln.strip():
+            rows.append(ln)
+            row_lines.append(column_line + 1 + j)
+    n = len(rows)
+    problems: list[tuple[int, str]] = []
+    counts = np.array([r.count("\t") + 1 for r in rows], dtype=np.int64)
+    count_ok = counts >= needed
+    # Extra non-empty fields beyond the header's columns mean a shifted row.
+    over = np.zeros(n, dtype=bool)
+    for i in np.flatnonzero(counts > n_fields):  # trailing empty fields are fine
+        over[i] = rows[i].rstrip("\t\r ").count("\t") + 1 > n_fields
+    head = time_col + (2 if two_part_time else 1)
+    if scalar_cols:
+        head = max(head, max(scalar_cols.values()) + 1)
+    split = [r.split("\t", head)[:head] for r in rows]  # only the leading fields are kept
+    stamps = []
+    for f in split:
+        if len(f) > time_col:
+            stamps.append(f[time_col] + (" " + f[time_col + 1] if two_part_time and
+                                         len(f) > time_col + 1 else ""))
+        else:
+            stamps.append("")
+    times, time_ok = parse_times(stamps)
+    values = np.full((n, len(value_cols)), np.nan)
+    vals_ok = np.zeros(n, dtype=bool)
+    good_idx = np.flatnonzero(count_ok & ~over)
+    for s in range(0, good_idx.size, CHUNK * 4):
+        part = good_idx[s:s + CHUNK * 4]
+        v, ok = _parse_block([rows[i] for i in part], value_cols)
+        values[part] = v
+        vals_ok[part] = ok
+        if progress is not None:
+            progress(min(s + part.size, good_idx.size), good_idx.size)
+    row_ok = count_ok & ~over & vals_ok & time_ok
+    for i in np.flatnonzero(~row_ok):
+        if not count_ok[i]:
+            why = (f"cut row: expected at least {needed} tab-separated fields, found "
+                   f"{counts[i]}")
+        elif over[i]:
+            why = f"more fields than the {n_fields} columns (shifted row)"
+        elif not time_ok[i]:
+            why = f"unreadable time stamp {stamps[i].strip()[:40]!r}"
+        else:
+            bad = next((columns[c] for c in value_cols
+                        if not _is_number(rows[i].split("\t")[c])), "?")
+            cell = rows[i].split("\t")[columns.index(bad)] if bad in columns else ""
+            why = f"column {bad!r}: expected a number, found {cell.strip()[:30]!r}"
+        problems.append((row_lines[i], why))
+        values[i] = np.nan
+    scalars: dict[str, list[str]] = {
+        name: [f[col].strip() if len(f) > col and col < head else "" for f in split]
+        for name, col in scalar_items
+    }
     index = {h: j for j, h in enumerate(heights.tolist())}
     out: dict[str, np.ndarray] = {}
     extra: dict[str, np.ndarray] = {}
+    gq = {("v1:" + k.lower()): v for k, v in (gate_quantities or {}).items()}
     for c, (_, altitude, key) in enumerate(mapped):
-        target = out if key in quantities else extra
-        name = quantities.get(key, key)
+        field = quantities.get(key) or gq.get(key)
+        target = out if field else extra
+        name = field or key.removeprefix("v1:")
         if name not in target:
-            target[name] = np.full((len(rows), heights.size), np.nan)
-        target[name][:, index[altitude]] = table[:, c]
+            target[name] = np.full((n, heights.size), np.nan)
+        target[name][:, index[altitude]] = values[:, c]
     return Parsed(
-        path=p,
-        version=version,
-        header=header,
-        heights=heights,
-        time=times,
-        quantities=out,
-        extra=extra,
-        scalars=scalars,
-        scalar_lines=column_line,
-        row_lines=row_lines,
+        path=p, version=version, header=header, heights=heights, time=times,
+        time_ok=time_ok, row_ok=row_ok, quantities=out, extra=extra, scalars=scalars,
+        scalar_lines=column_line, row_lines=np.array(row_lines, dtype=np.int64),
+        problems=problems, notes=notes, columns=columns,
     )
+
+
+def _is_number(text: str) -> bool:
+    try:
+        parse_float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def scalar_arrays(scalars: Mapping[str, list[str]]) -> dict[str, np.ndarray]:
@@ -279,3 +471,122 @@ def scalar_arrays(scalars: Mapping[str, list[str]]) -> dict[str, np.ndarray]:
         except ValueError:
             out[name] = np.array(values, dtype=str)
     return out
+
+
+@dataclasses.dataclass
+class HeaderFacts:
+    """Convention facts from a Windcube header (all angles in degrees)."""
+
+    instrument: str
+    scan_angle: float
+    cone_angle: float
+    direction_offset: float
+    pitch: float
+    roll: float
+    cnr_threshold: float
+    timezone: str
+    utc_offset_hours: float
+
+
+def header_facts(parsed: Parsed) -> HeaderFacts:
+    """Instrument kind, angles, CNR threshold and clock zone of a parsed Windcube file.
+
+    A header without `timezone` is taken as UTC (a note says so).
+    """
+    h, p = parsed.header, parsed.path
+    instrument = "windcube_v1" if parsed.version == "V1" else "windcube_v2"
+    scan = header_angle(h, p, "ScanAngle", "Scan Angle", "ConeAngle")
+    tz = header_lookup(h, "timezone", "time zone", "TimeZone", "UTC offset") or ""
+    off = parse_utc_offset(tz) if tz else None
+    if off is None:
+        if tz:
+            try:
+                off = float(tz)
+            except ValueError:
+                raise file_error(
+                    p, None, f"header 'timezone': expected e.g. 'UTC+1' or 'UTC--3', found "
+                    f"{tz!r}"
+                ) from None
+        else:
+            off = 0.0
+            parsed.notes.append(f"{p}: no 'timezone' in the header; times taken as UTC")
+    return HeaderFacts(
+        instrument=instrument,
+        scan_angle=scan,
+        cone_angle=scan if np.isfinite(scan) else NOMINAL_CONE[instrument],
+        direction_offset=header_angle(h, p, "DirectionOffset", "Direction Offset"),
+        pitch=header_angle(h, p, "PitchAngle", "Pitch"),
+        roll=header_angle(h, p, "RollAngle", "Roll"),
+        cnr_threshold=header_angle(h, p, "CNRThreshold", "CNR Threshold"),
+        timezone=tz,
+        utc_offset_hours=float(off),
+    )
+
+
+def to_utc(local: np.ndarray, hours: float) -> np.ndarray:
+    """Instrument-clock `datetime64[ms]` to UTC (`local - offset`)."""
+    return local - offset_timedelta(hours)
+
+
+def report(parsed: Parsed, kind: str) -> list[str]:
+    """Warn once (naming file and lines) about corrupt rows and renamed columns."""
+    msgs = [f"{parsed.path}, line {ln}: {why}; read as a flagged missing {kind}"
+            for ln, why in parsed.problems]
+    if parsed.problems:
+        warnings.warn(
+            f"{parsed.path}: {len(parsed.problems)} corrupt row(s) at line(s) "
+            f"{summarise_lines([ln for ln, _ in parsed.problems])} read as flagged missing "
+            f"{kind}s (first: line {parsed.problems[0][0]}: {parsed.problems[0][1]}); every "
+            "other row was read",
+            stacklevel=3,
+        )
+    for note in parsed.notes:
+        if "appears" in note or "same quantity" in note:
+            warnings.warn(note, stacklevel=3)
+    return msgs + list(parsed.notes)
+
+
+def infer_bad_times(time: np.ndarray, ok: np.ndarray, step: np.timedelta64 | None):
+    """Fill unreadable stamps from regular neighbours; returns `(time, inferred, keep)`.
+
+    A bad stamp between good ones whose spacing is an exact multiple of `step` gets the
+    stamp its position implies; a bad stamp that cannot be placed is dropped (`keep` False).
+    """
+    t = time.copy()
+    inferred = np.zeros(t.size, dtype=bool)
+    keep = ok.copy()
+    if step is None or ok.all():
+        return t, inferred, keep | ok
+    good = np.flatnonzero(ok)
+    for i in np.flatnonzero(~ok):
+        before = good[good < i]
+        after = good[good > i]
+        guess = None
+        if before.size:
+            g = time[before[-1]] + (i - before[-1]) * step
+            if not after.size or time[after[0]] - g == (after[0] - i) * step:
+                guess = g
+        elif after.size:
+            guess = time[after[0]] - (after[0] - i) * step
+        if guess is not None:
+            t[i] = guess
+            inferred[i] = True
+            keep[i] = True
+    return t, inferred, keep
+
+
+def regular_step(time: np.ndarray, ok: np.ndarray) -> np.timedelta64 | None:
+    """The median spacing of the readable stamps (None with fewer than 2)."""
+    good = time[ok]
+    if good.size < 2:
+        return None
+    d = np.diff(good)
+    d = d[d > np.timedelta64(0, "ms")]
+    if d.size == 0:
+        return None
+    return np.median(d.astype(np.int64)).astype(np.int64).astype("timedelta64[ms]")
+
+
+def flag_value(flags: np.ndarray, bad: np.ndarray, bit: RecordFlag) -> None:
+    """`flags |= bit` where `bad` (in place)."""
+    flags[bad] |= int(bit)

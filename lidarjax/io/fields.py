@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import zipfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -153,6 +154,20 @@ class FieldArrays:
         return iter((self.x, self.y, self.z, self.velocity))
 
 
+def _check_real(path, name: str, a: Any) -> None:
+    """Refuse complex, float16, boolean and non-numeric velocity arrays (naming the file)."""
+    dt = np.asarray(a).dtype
+    if np.issubdtype(dt, np.complexfloating):
+        raise ValueError(f"{os.fspath(path)}: {name} is complex ({dt}); a velocity field must be "
+                         "real (float32 or float64)")
+    if dt == np.float16:
+        raise ValueError(f"{os.fspath(path)}: {name} is float16 (3 significant digits); save the "
+                         "field as float32 or float64")
+    if not (np.issubdtype(dt, np.floating) or np.issubdtype(dt, np.integer)) or dt == np.bool_:
+        raise ValueError(f"{os.fspath(path)}: {name} has dtype {dt}; expected real numbers "
+                         "(float32 or float64)")
+
+
 def _check_grid(
     x: Any, y: Any, z: Any, velocity: Any, where: str
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -199,30 +214,45 @@ def _gridded(path: Path, fmt: str, x, y, z, velocity) -> FieldArrays:
 
 
 def _read_npz(path: Path) -> FieldArrays:
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as err:
-        raise ValueError(f"{os.fspath(path)}: not a readable .npz archive ({err})") from None
-    with archive as data:
-        names = set(data.files)
-        missing = [n for n in "xyz" if n not in names]
-        if not missing and "velocity" in names:
-            return _gridded(path, "npz", data["x"], data["y"], data["z"], data["velocity"])
-        missing += [n for n in "uvw" if n not in names]
-        if missing:
-            raise ValueError(
-                f"{os.fspath(path)}: missing arrays {', '.join(missing)}; expected x, y, z and "
-                f"u, v, w (or velocity), found {', '.join(sorted(names)) or 'none'}"
-            )
-        comps = [np.asarray(data[n], dtype=np.float64) for n in "uvw"]
-        x, y, z = (data[n] for n in "xyz")
+    with open(path, "rb") as fh:  # our handle: closed even when numpy gives up half-way
+        try:
+            archive = np.load(fh, allow_pickle=False)
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
+            raise ValueError(f"{os.fspath(path)}: not a readable .npz archive ({err})") from None
+        if not hasattr(archive, "files"):
+            raise ValueError(f"{os.fspath(path)}: a single array (.npy), not an .npz archive "
+                             "with x, y, z and velocity")
+        try:
+            with archive as data:
+                names = set(data.files)
+                missing = [n for n in "xyz" if n not in names]
+                wanted = ["x", "y", "z", "velocity"] if not missing and "velocity" in names \
+                    else ["x", "y", "z", "u", "v", "w"]
+                missing = [n for n in wanted if n not in names]
+                if missing:
+                    raise ValueError(
+                        f"{os.fspath(path)}: missing arrays {', '.join(missing)}; expected x, "
+                        f"y, z and u, v, w (or velocity), found "
+                        f"{', '.join(sorted(names)) or 'none'}"
+                    )
+                arrays = {n: data[n] for n in wanted}
+        except (OSError, EOFError, zipfile.BadZipFile, ValueError) as err:  # a cut member
+            if isinstance(err, ValueError) and str(err).startswith(os.fspath(path)):
+                raise
+            raise ValueError(f"{os.fspath(path)}: corrupt .npz archive ({err}); write the "
+                             "field again") from None
+    for n, a in arrays.items():
+        _check_real(path, n, a)
+    if "velocity" in arrays:
+        return _gridded(path, "npz", arrays["x"], arrays["y"], arrays["z"], arrays["velocity"])
+    comps = [np.asarray(arrays[n], dtype=np.float64) for n in "uvw"]
     shapes = {c.shape for c in comps}
     if len(shapes) != 1:
         raise ValueError(
             f"{os.fspath(path)}: u, v, w must have the same shape (nx, ny, nz), got "
             f"{', '.join(str(c.shape) for c in comps)}"
         )
-    return _gridded(path, "npz", x, y, z, np.stack(comps, axis=-1))
+    return _gridded(path, "npz", arrays["x"], arrays["y"], arrays["z"], np.stack(comps, axis=-1))
 
 
 def _read_netcdf(path: Path) -> FieldArrays:
@@ -258,6 +288,7 @@ def _read_netcdf(path: Path) -> FieldArrays:
                     f"{os.fspath(path)}: variable {names[n]} must have dimensions (x, y, z), got "
                     f"{da.dims}"
                 )
+            _check_real(path, n, np.empty(0, da.dtype))
             order = [next(d for d in da.dims if str(d).lower() == c) for c in "xyz"]
             comps.append(np.asarray(da.transpose(*order).values, dtype=np.float64))
         x, y, z = (np.asarray(ds[c].values, dtype=np.float64) for c in dims)

@@ -228,6 +228,7 @@ def write_seed_output(
     columns: Mapping[str, Any],
     *,
     verbose: int | bool,
+    flags: Any = None,
 ) -> Path:
     """Write a seed-format output file `windcube simulation <beta> degrees.dat`.
 
@@ -239,6 +240,9 @@ def write_seed_output(
       `nh`. Angles in the seed azimuth convention (`seed_azimuth`). Missing or unknown
       names raise `ValueError`.
     - `verbose`: 1 (or `True`) writes the header line of column names; 0 writes none.
+    - `flags`: optional `(nh,)` integer `lidarjax.Flag` bits per height, written as a 22nd
+      column `flags` (after the seed's 21) that explains each NaN. The seed C code never
+      wrote it; leave it out for files that must match the UDF's byte for byte.
 
     **Returns:** the path written. Numbers are formatted like the C `" %6.3f"` (NaN as
     `nan`); the write is atomic.
@@ -247,11 +251,20 @@ def write_seed_output(
         raise ValueError(f"verbose must be 0 or 1, got {verbose!r}")
     arrays = _check_columns(columns, SEED_COLUMNS)
     table = np.column_stack([arrays[c] for c in SEED_COLUMNS])
+    names = SEED_COLUMNS
+    bits = None
+    if flags is not None:
+        bits = np.asarray(flags).astype(np.int64).reshape(-1)
+        if bits.shape != (table.shape[0],):
+            raise ValueError(f"flags must have one value per height ({table.shape[0]}), got "
+                             f"shape {np.shape(flags)}")
+        names = SEED_COLUMNS + ("flags",)
     parts: list[str] = []
     if verbose:
-        parts.append(" ".join(SEED_COLUMNS) + "\n")
-    for row in table:
-        parts.append("".join(f" {v:6.3f}" for v in row) + " \n")
+        parts.append(" ".join(names) + "\n")
+    for i, row in enumerate(table):
+        tail = "" if bits is None else f" {int(bits[i]):6d}"
+        parts.append("".join(f" {v:6.3f}" for v in row) + tail + " \n")
     folder = Path(directory)
     folder.mkdir(parents=True, exist_ok=True)
     return atomic_write_text(folder / seed_output_filename(beta), "".join(parts))
@@ -261,39 +274,46 @@ def read_seed_output(path: PathLike) -> dict[str, Float[np.ndarray, " h"]]:
     """Read a seed-format output file, with or without its header line.
 
     **Returns:** a dict from each of `SEED_COLUMNS` to a float64 array `(h,)`, in file
-    order. Values carry the file's 3 decimals.
+    order. Values carry the file's 3 decimals. A file written with `flags` (22 columns)
+    also gives `"flags"`.
 
     Raises `ValueError` naming the line for a header that is not the 21 seed names, a
     row without 21 fields, or a non-numeric field.
     """
     p = require_file(path, "seed output file")
     rows: list[list[float]] = []
+    columns = SEED_COLUMNS
     with open(p, encoding="utf-8") as fh:
         for number, raw in enumerate(fh, start=1):
             toks = raw.split()
             if not toks:
                 continue
             if not rows and not _numeric(toks[0]):
+                if tuple(toks) == SEED_COLUMNS + ("flags",):
+                    columns = SEED_COLUMNS + ("flags",)
+                    continue
                 if tuple(toks) != SEED_COLUMNS:
                     raise file_error(
                         p, number, "expected the seed header (" + " ".join(SEED_COLUMNS)
                         + f") or numbers, found {' '.join(toks[:4])} ..."
                     )
                 continue
-            if len(toks) != len(SEED_COLUMNS):
+            if not rows and len(toks) == len(SEED_COLUMNS) + 1:
+                columns = SEED_COLUMNS + ("flags",)
+            if len(toks) != len(columns):
                 raise file_error(
-                    p, number, f"expected {len(SEED_COLUMNS)} numbers, found {len(toks)} fields"
+                    p, number, f"expected {len(columns)} numbers, found {len(toks)} fields"
                 )
             try:
                 rows.append([float(t) for t in toks])
             except ValueError:
                 bad = next(i for i, t in enumerate(toks) if not _numeric(t))
                 raise file_error(
-                    p, number, f"column {SEED_COLUMNS[bad]!r}: expected a number, "
+                    p, number, f"column {columns[bad]!r}: expected a number, "
                     f"found {toks[bad]!r}"
                 ) from None
-    table = np.array(rows, dtype=np.float64).reshape(-1, len(SEED_COLUMNS))
-    return {name: table[:, i].copy() for i, name in enumerate(SEED_COLUMNS)}
+    table = np.array(rows, dtype=np.float64).reshape(-1, len(columns))
+    return {name: table[:, i].copy() for i, name in enumerate(columns)}
 
 
 def _numeric(text: str) -> bool:

@@ -22,6 +22,21 @@ zone    verbose height  nh      gamma   beta    psi     epsilon
 - then one row `beta x y z` per platform rotation: the lidar location (m) in the
   CFD frame when the free stream comes at that `beta` (degrees).
 
+**Explicit heights (a lidarjax extension).** A lidar's configured altitudes (a Windcube's
+40, 54, 74 ... m) are rarely `j * height / nh`. After the values line, a line starting with
+the word `heights` may list them, in metres above the lidar, strictly increasing:
+
+```
+heights 40      54      74      94      114
+```
+
+`nh` must then equal the number of heights and `height` the top one, so the values line
+stays true. Files without the line read exactly as before (heights `j * height / nh`). The
+seed C code does not know this line; keep it out of files meant for the UDF.
+
+`nh` (or the number of explicit heights) is limited to `MAX_HEIGHTS` = 1000, far above any
+lidar, so that a typo cannot start a computation that runs for hours.
+
 The C code skipped `beta / 30` rows to find the location, which only works for a
 30 degree spacing with rows in order from 0. Here rows are looked up by their beta
 value (modulo 360, tolerance `BETA_TOLERANCE_DEG`), so any sector spacing and any row
@@ -48,6 +63,7 @@ from ._common import (
 
 __all__ = [
     "BETA_TOLERANCE_DEG",
+    "MAX_HEIGHTS",
     "SETTINGS_HEADER",
     "Settings",
     "read_settings",
@@ -56,6 +72,9 @@ __all__ = [
 
 BETA_TOLERANCE_DEG = 1e-6
 """Two betas closer than this (degrees, modulo 360) name the same location row."""
+
+MAX_HEIGHTS = 1000
+"""The most heights a settings file may ask for (`nh`, or explicit heights)."""
 
 SETTINGS_HEADER: tuple[str, ...] = (
     "zone",
@@ -97,6 +116,8 @@ class Settings:
       each row.
     - `header`: the header words as written in the file.
     - `source`: the file this was read from (for error messages), or `None`.
+    - `explicit_heights`: `(nh,)` metres above the lidar, strictly increasing, or `None`
+      for the seed's `j * height / nh` (see the module docstring).
 
     Arrays are stored read-only. Construction validates the values and raises
     `ValueError` naming the fix.
@@ -114,6 +135,7 @@ class Settings:
     locations: Float[np.ndarray, "s 3"]
     header: tuple[str, ...] = SETTINGS_HEADER
     source: str | None = None
+    explicit_heights: Float[np.ndarray, " h"] | None = None
 
     def __post_init__(self) -> None:
         where = f"{self.source}: " if self.source else ""
@@ -121,6 +143,24 @@ class Settings:
             raise ValueError(f"{where}verbose must be 0 or 1, got {self.verbose!r}")
         if isinstance(self.nh, bool) or int(self.nh) != self.nh or self.nh < 1:
             raise ValueError(f"{where}nh must be a positive integer, got {self.nh!r}")
+        if self.nh > MAX_HEIGHTS:
+            raise ValueError(f"{where}nh = {self.nh} heights is more than the limit of "
+                             f"{MAX_HEIGHTS}; a lidar measures a few dozen at most")
+        if self.explicit_heights is not None:
+            eh = np.array(self.explicit_heights, dtype=np.float64).reshape(-1)
+            if eh.size == 0 or not np.all(np.isfinite(eh)) or np.any(eh <= 0):
+                raise ValueError(f"{where}explicit heights must be finite and > 0 m, got "
+                                 f"{eh.tolist()}")
+            if np.any(np.diff(eh) <= 0):
+                raise ValueError(f"{where}explicit heights must be strictly increasing, got "
+                                 f"{eh.tolist()}")
+            if eh.size != int(self.nh) or not math.isclose(float(eh[-1]), float(self.height),
+                                                             rel_tol=1e-9):
+                raise ValueError(
+                    f"{where}the values line (height {format_number(float(self.height))}, nh "
+                    f"{self.nh}) disagrees with the {eh.size} explicit heights; set height to "
+                    f"{format_number(float(eh[-1]))} and nh to {eh.size}")
+            object.__setattr__(self, "explicit_heights", freeze(eh))
         for name in ("height", "gamma", "beta", "psi", "epsilon"):
             if not math.isfinite(float(getattr(self, name))):
                 raise ValueError(f"{where}{name} must be finite, got {getattr(self, name)!r}")
@@ -181,8 +221,20 @@ class Settings:
         return self.locations[hits[0]].copy()
 
     def heights(self) -> Float[np.ndarray, " h"]:
-        """Interrogation heights above the lidar, metres: `h_j = j * height / nh`, j = 1..nh."""
+        """Interrogation heights above the lidar, metres: the explicit heights when the file
+        lists them, else `h_j = j * height / nh`, j = 1..nh."""
+        if self.explicit_heights is not None:
+            return np.array(self.explicit_heights, dtype=np.float64)
         return np.arange(1, self.nh + 1, dtype=np.float64) * self.height / self.nh
+
+    def with_heights(self, heights) -> Settings:
+        """A copy measuring at explicit `heights` (m above the lidar, strictly increasing);
+        `height` and `nh` follow them."""
+        h = np.asarray(heights, dtype=np.float64).reshape(-1)
+        if h.size == 0:
+            raise ValueError("with_heights: at least one height is needed")
+        return dataclasses.replace(self, height=float(h[-1]), nh=int(h.size),
+                                   explicit_heights=h)
 
 
 def _tokens(raw: str) -> list[str]:
@@ -260,6 +312,9 @@ def read_settings(path: PathLike) -> Settings:
     if height <= 0:
         raise file_error(p, vline, f"height: expected a length > 0 m, found {values[2]!r}")
     nh = _integer(p, vline, "nh", values[3], positive=True)
+    if nh > MAX_HEIGHTS:
+        raise file_error(p, vline, f"nh: {values[3]} heights is more than the limit of "
+                         f"{MAX_HEIGHTS}; a lidar measures a few dozen heights at most")
     gamma, beta, psi, epsilon = (
         _number(p, vline, name, text)
         for name, text in zip(("gamma", "beta", "psi", "epsilon"), values[4:], strict=True)
@@ -268,7 +323,27 @@ def read_settings(path: PathLike) -> Settings:
     betas: list[float] = []
     locations: list[tuple[float, float, float]] = []
     row_lines: list[int] = []
+    explicit: list[float] | None = None
     for number, toks in lines[2:]:
+        if toks[0].lower() == "heights":
+            if explicit is not None:
+                raise file_error(p, number, "a second 'heights' line; keep one")
+            explicit = [_number(p, number, "heights", t) for t in toks[1:]]
+            if not explicit:
+                raise file_error(p, number, "'heights' needs at least one height in metres")
+            if len(explicit) > MAX_HEIGHTS:
+                raise file_error(p, number, f"{len(explicit)} heights is more than the limit "
+                                 f"of {MAX_HEIGHTS}")
+            if any(h <= 0 for h in explicit) or any(
+                    b <= a for a, b in zip(explicit, explicit[1:], strict=False)):
+                raise file_error(p, number, "heights must be > 0 m and strictly increasing")
+            if len(explicit) != nh or not math.isclose(explicit[-1], height, rel_tol=1e-9):
+                raise file_error(
+                    p, number, f"the values line says height {values[2]} and nh {values[3]}, "
+                    f"but {len(explicit)} heights up to {format_number(explicit[-1])} m are "
+                    f"listed; set height to {format_number(explicit[-1])} and nh to "
+                    f"{len(explicit)} on line {vline}")
+            continue
         if len(toks) != 4:
             raise file_error(p, number, f"expected 4 fields 'beta x y z', found {len(toks)}")
         b, x, y, z = (
@@ -301,6 +376,7 @@ def read_settings(path: PathLike) -> Settings:
         locations=np.asarray(locations),
         header=tuple(header),
         source=str(p),
+        explicit_heights=None if explicit is None else np.asarray(explicit),
     )
     if not settings.has_location(beta):
         raise file_error(
@@ -340,6 +416,8 @@ def write_settings(path: PathLike, settings: Settings) -> Path:
                                          settings.epsilon)),
         ]
     )
+    if settings.explicit_heights is not None:
+        text += row(["heights", *(format_number(h) for h in settings.explicit_heights)])
     for b, loc in zip(settings.betas, settings.locations, strict=True):
         text += row([format_number(b), *(format_number(v) for v in loc)])
     return atomic_write_text(path, text)

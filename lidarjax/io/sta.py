@@ -21,15 +21,33 @@ header's `DirectionOffset` already applied by the instrument.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from jaxtyping import Bool, Float, Shaped
 
-from ._common import PathLike, freeze, import_optional, normalise_key
-from ._windcube import header_angle, read_windcube, scalar_arrays
+from ._common import (
+    BLOCKING_FLAGS,
+    MIN_AVAILABILITY,
+    PathLike,
+    RecordFlag,
+    freeze,
+    import_optional,
+    normalise_key,
+)
+from ._windcube import (
+    header_facts,
+    infer_bad_times,
+    read_windcube,
+    regular_step,
+    report,
+    scalar_arrays,
+    to_utc,
+)
 
-__all__ = ["STA_FIELDS", "STA_QUANTITIES", "StaRecord", "read_sta", "write_sta"]
+__all__ = ["STA_FIELDS", "STA_GATE_QUANTITIES", "STA_QUANTITIES", "RecordFlag", "StaRecord", "read_sta",
+           "write_sta"]
 
 STA_FIELDS: tuple[str, ...] = (
     "speed",
@@ -70,6 +88,25 @@ STA_QUANTITIES: dict[str, str] = {
 }
 """Normalised quantity name (`normalise_key`) -> `StaRecord` field."""
 
+STA_GATE_QUANTITIES: dict[str, str] = {
+    "vhm": "speed",
+    "dvh": "speed_std",
+    "vhmax": "speed_max",
+    "vhmin": "speed_min",
+    "azim": "direction",
+    "dir": "direction",
+    "wm": "w",
+    "dw": "w_std",
+    "cnrm": "cnr",
+    "cnrmin": "cnr_min",
+    "avail": "availability",
+}
+"""Windcube V1 gate-numbered column prefix (lower case; `Vhm1` is gate 1) -> field. Other
+gate-numbered columns (`um`, `vm`, `dCNR`, `sigmafreqm` ...) go to `extra` under their
+lower-case prefix."""
+
+_WIND_FIELDS = ("speed", "speed_std", "speed_min", "speed_max", "direction", "w", "w_std")
+
 _UNITS = {
     "speed": "m/s",
     "speed_std": "m/s",
@@ -87,31 +124,49 @@ _UNITS = {
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class StaRecord:
-    """A Windcube 10-minute statistics record (`read_sta`). Arrays are read-only.
+    """A Windcube 10-minute (or 1-minute) statistics record (`read_sta`). Read-only arrays.
 
     Dimensions: `t` intervals, `k` altitudes.
 
     **Fields:**
 
     - `path`: the file read.
-    - `version`: `"V2"` (`HeaderSize=`) or `"V1"` (`HeaderLength=`).
+    - `version`: `"V2"` (`HeaderSize=`, V2 and V2.1) or `"V1"` (`HeaderLength=`).
     - `header`: every `key=value` of the header, keys and values as written.
-    - `time`: `(t,)` `datetime64[s]`, end of each interval, instrument clock.
-    - `heights`: `(k,)` metres above the instrument, ascending.
+    - `time`: `(t,)` `datetime64[s]`, **UTC, end of each interval** (the instrument clock
+      `time_local` minus the header's zone offset).
+    - `heights`: `(k,)` metres above the instrument, ascending (the header's altitudes).
     - `speed`, `speed_std`, `speed_min`, `speed_max`: `(t, k)` horizontal wind speed
       mean, standard deviation ("dispersion"), minimum and maximum, m/s.
     - `direction`: `(t, k)` mean wind direction, degrees, meteorological (from,
-      clockwise from north), as reported.
-    - `w`, `w_std`: `(t, k)` vertical wind ("Z-wind", positive up) and its dispersion, m/s.
+      clockwise from north), as reported (the instrument has applied `DirectionOffset`).
+    - `w`, `w_std`: `(t, k)` vertical wind, **positive up**, and its dispersion, m/s.
+      `w = -z_wind`: the file's `Z-wind` is positive **down** (towards the lidar), like its
+      radial speeds (see `lidarjax.io.rtd`, where the real V2.1 file pins this sign).
     - `cnr`, `cnr_min`: `(t, k)` carrier-to-noise ratio mean and minimum, dB.
     - `spectral_broadening`: `(t, k)` Doppler spectrum broadening, m/s.
     - `availability`: `(t, k)` data availability, percent.
     - `missing`: the fields above that the file lacks (NaN-filled).
-    - `extra`: other per-altitude quantities, normalised name -> `(t, k)`.
+    - `extra`: other per-altitude quantities, normalised name -> `(t, k)` (V1: lower-case
+      gate prefix, e.g. `um`, `vm`); a repeated column is kept as `name#2`.
     - `scalars`: the other columns (temperatures, pressure, wiper count ...), name as
-      written -> `(t,)` float64, or text when not numeric.
+      written -> `(t,)` float64, or text when not numeric; a repeated name gets `#2`.
     - `scan_angle`: degrees from vertical (header `ScanAngle`); NaN when `NA` or absent.
     - `direction_offset`: degrees (header `DirectionOffset`); NaN when absent.
+    - `instrument`: `"windcube_v1"` or `"windcube_v2"`.
+    - `cone_angle`: `scan_angle` when given, else the instrument's nominal cone (30 deg V1,
+      28 deg V2); `beam_azimuths`: the beams' azimuths in the instrument frame, degrees
+      (NaN: the vertical beam of V2).
+    - `pitch`, `roll`: installation tilt from the header, degrees (NaN when absent).
+    - `cnr_threshold`: the header's `CNRThreshold`, dB (NaN when absent).
+    - `timezone`: the header's zone as written; `utc_offset_hours`: hours east of UTC.
+    - `time_local`: `(t,)` the stamps as written; `time_convention`: `"end"`.
+    - `period`: the averaging period (`timedelta64[s]`, the rows' median spacing).
+    - `flags`: `(t, k)` `RecordFlag` bits (corrupt row, low availability, impossible
+      value, duplicate time); the wind fields of a flagged record are NaN.
+    - `row_lines`: `(t,)` the 1-based line of each row in the file.
+    - `warnings`: messages about corrupt rows (file and line) and renamed columns.
+    - `min_availability`: the availability threshold applied, percent.
     """
 
     path: str
@@ -135,6 +190,22 @@ class StaRecord:
     scalars: dict[str, Shaped[np.ndarray, " t"]]
     scan_angle: float
     direction_offset: float
+    instrument: str = "windcube_v2"
+    cone_angle: float = 28.0
+    beam_azimuths: tuple[float, ...] = (0.0, 90.0, 180.0, 270.0, float("nan"))
+    pitch: float = float("nan")
+    roll: float = float("nan")
+    cnr_threshold: float = float("nan")
+    timezone: str = ""
+    utc_offset_hours: float = 0.0
+    time_local: Any = None
+    time_convention: str = "end"
+    period: Any = None
+    flags: Any = None
+    z_wind: Any = None
+    row_lines: Any = None
+    warnings: tuple[str, ...] = ()
+    min_availability: float = MIN_AVAILABILITY
 
     def __post_init__(self) -> None:
         if self.time.ndim != 1 or self.heights.ndim != 1:
@@ -145,17 +216,20 @@ class StaRecord:
                 raise ValueError(
                     f"{name} must have shape (t, k) = ({t}, {k}), got {getattr(self, name).shape}"
                 )
+        if self.flags is None:
+            object.__setattr__(self, "flags", freeze(np.zeros((t, k), np.int32)))
 
     @property
     def valid(self) -> Bool[np.ndarray, "t k"]:
-        """`(t, k)` True where both speed and direction are finite."""
-        return np.isfinite(self.speed) & np.isfinite(self.direction)
+        """`(t, k)` True where speed and direction are finite and no blocking flag is set."""
+        return (np.isfinite(self.speed) & np.isfinite(self.direction)
+                & ((self.flags & int(BLOCKING_FLAGS)) == 0))
 
     def to_pandas(self) -> Any:
         """A **long** `pandas.DataFrame`: one row per (interval, altitude).
 
-        Columns `time`, `height` (m), then `STA_FIELDS`; rows ordered by time, then
-        height. Needs pandas (`pip install lidarjax[pandas]`).
+        Columns `time` (UTC, end of interval), `height` (m), then `STA_FIELDS` and `flags`;
+        rows ordered by time, then height. Needs pandas (`pip install lidarjax[pandas]`).
         """
         pd = import_optional("pandas", "pandas", "StaRecord.to_pandas")
         t, k = self.speed.shape
@@ -165,6 +239,7 @@ class StaRecord:
         }
         for name in STA_FIELDS:
             data[name] = getattr(self, name).reshape(-1)
+        data["flags"] = np.asarray(self.flags).reshape(-1)
         return pd.DataFrame(data)
 
     @staticmethod
@@ -173,46 +248,136 @@ class StaRecord:
         return dict(_UNITS)
 
 
-def read_sta(path: PathLike) -> StaRecord:
-    """Read a Windcube `.sta` / `.stdsta` 10-minute statistics file (V1 or V2 layout).
+def read_sta(
+    path: PathLike,
+    *,
+    min_availability: float = MIN_AVAILABILITY,
+    progress: Callable[[int, int], None] | None = None,
+) -> StaRecord:
+    """Read a Windcube `.sta` / `.stdsta` statistics file: V1 (gate-numbered), V2, V2.1,
+    10-minute or 1-minute.
 
-    The file is streamed line by line (cp1252). See the module docstring for the format.
+    Parsing is vectorised (about 0.5 s for a year of 10-minute rows at 12 heights). See the
+    module docstring for the format and `StaRecord` for fields and conventions.
 
     **Arguments:**
 
     - `path`: the file.
+    - `min_availability`: percent; records whose `Data Availability` is below it are
+      flagged `RecordFlag.LOW_AVAILABILITY` and their wind fields set NaN (default
+      `MIN_AVAILABILITY` = 80). Use 0 to keep every record.
+    - `progress`: optional `progress(rows_done, rows_total)` callback.
 
-    **Returns:** a `StaRecord` (field meanings, units and conventions there).
+    **Returns:** a `StaRecord`; times in UTC, end of interval.
 
-    Raises `FileNotFoundError` naming a missing path, and `ValueError` naming the file,
-    the line and the problem for: a first line that is not `HeaderSize=N` /
-    `HeaderLength=N`, a file that ends inside the header, a missing column-names line,
-    non-numeric altitudes, a column whose altitude is not in the header, duplicated
-    columns, a short row, an unparseable timestamp or a non-numeric value (`NaN`,
-    `NA` and empty fields are NaN).
+    **Bad rows** do not stop the read: a row cut short, with an unreadable time stamp or a
+    non-numeric cell becomes a record of NaN flagged `RecordFlag.CORRUPT_ROW` (its time
+    inferred from regular neighbours, `TIME_INFERRED`, or the row dropped when it cannot
+    be placed), and one `UserWarning` names the file and lines (`StaRecord.warnings` lists
+    each). Physically impossible values (negative speed or availability, direction outside
+    [0, 360], availability outside [0, 100]) are flagged `IMPOSSIBLE_VALUE` and set NaN,
+    never reinterpreted; CNR above 0 dB is flagged `HIGH_CNR` (advisory: cloud or fog).
+
+    Raises `FileNotFoundError` naming a missing path, and a one-line `ValueError` naming the
+    file, the line and the fix for: an empty or binary/UTF-16 file, a first line that is
+    not `HeaderSize=N` / `HeaderLength=N`, a missing column-names line, non-numeric
+    altitudes, a column whose altitude is not in the header, no per-altitude column, a file
+    without speed or direction columns, and a bad `min_availability`.
     """
-    parsed = read_windcube(path, STA_QUANTITIES, "Windcube .sta file")
-    t, k = len(parsed.time), parsed.heights.size
-    fields = {}
+    if not np.isfinite(min_availability) or not 0.0 <= min_availability <= 100.0:
+        raise ValueError(f"min_availability must be a percentage in [0, 100], got "
+                         f"{min_availability!r}")
+    parsed = read_windcube(path, STA_QUANTITIES, "Windcube .sta file",
+                           gate_quantities=STA_GATE_QUANTITIES, progress=progress)
+    p = parsed.path
+    for need in ("speed", "direction"):
+        if need not in parsed.quantities:
+            from ._common import file_error
+
+            raise file_error(
+                p, parsed.scalar_lines, f"no {need} columns ('40m Wind Speed (m/s)' / "
+                "'40m Wind Direction (°)' in V2, 'Vhm1' / 'Azim1' in V1): is this a "
+                "statistics (.sta) file?"
+            )
+    facts = header_facts(parsed)
+    step = regular_step(parsed.time, parsed.time_ok)
+    t_local, inferred, keep = infer_bad_times(parsed.time, parsed.time_ok, step)
+    messages = report(parsed, "record")
+    for i in np.flatnonzero(~keep):
+        messages.append(f"{p}, line {parsed.row_lines[i]}: left out: its time stamp is "
+                        "unreadable and the neighbouring rows are not regular enough to infer it")
+    t, k = int(keep.sum()), parsed.heights.size
+    flags = np.zeros((t, k), dtype=np.int32)
+    row_ok = parsed.row_ok[keep]
+    flags[~row_ok] |= int(RecordFlag.CORRUPT_ROW)
+    flags[inferred[keep]] |= int(RecordFlag.TIME_INFERRED)
+    fields: dict[str, np.ndarray] = {}
     missing = []
     for name in STA_FIELDS:
         if name in parsed.quantities:
-            fields[name] = freeze(parsed.quantities[name])
+            fields[name] = parsed.quantities[name][keep].copy()
         else:
-            fields[name] = freeze(np.full((t, k), np.nan))
+            fields[name] = np.full((t, k), np.nan)
             missing.append(name)
+    z_wind = fields["w"].copy()
+    fields["w"] = -fields["w"]  # file: positive down (towards the lidar); lidarjax: up
+    with np.errstate(invalid="ignore"):
+        impossible = (
+            (fields["speed"] < 0) | (fields["speed_min"] < 0) | (fields["speed_std"] < 0)
+            | (fields["direction"] < 0) | (fields["direction"] > 360)
+            | (fields["availability"] < 0) | (fields["availability"] > 100)
+        )
+        high_cnr = fields["cnr"] > 0
+        low = fields["availability"] < min_availability
+    flags[impossible] |= int(RecordFlag.IMPOSSIBLE_VALUE)
+    flags[low] |= int(RecordFlag.LOW_AVAILABILITY)
+    flags[high_cnr] |= int(RecordFlag.HIGH_CNR)
+    times = t_local[keep]
+    dup = np.zeros(t, dtype=bool)
+    if t > 1:
+        order = np.argsort(times, kind="stable")
+        same = times[order][1:] == times[order][:-1]
+        dup[order[1:][same]] = True
+    flags[dup] |= int(RecordFlag.DUPLICATE_TIME)
+    bad = (flags & int(RecordFlag.CORRUPT_ROW | RecordFlag.IMPOSSIBLE_VALUE
+                       | RecordFlag.LOW_AVAILABILITY)) != 0
+    for name in _WIND_FIELDS:
+        fields[name][bad] = np.nan
+    if impossible.any():
+        messages.append(f"{p}: {int(impossible.sum())} impossible value(s) (negative speed, "
+                        "direction outside [0, 360] ...) flagged and set NaN")
+    utc = to_utc(times, facts.utc_offset_hours)
+    period = (step if step is not None else np.timedelta64(600_000, "ms")).astype(
+        "timedelta64[s]")
+    azimuths = (0.0, 90.0, 180.0, 270.0) + ((float("nan"),) if parsed.version == "V2" else ())
     return StaRecord(
-        path=str(parsed.path),
+        path=str(p),
         version=parsed.version,
         header=parsed.header,
-        time=freeze(np.array(parsed.time, dtype="datetime64[s]").reshape(t)),
+        time=freeze(utc.astype("datetime64[s]")),
         heights=freeze(parsed.heights),
-        **fields,
+        **{n: freeze(a) for n, a in fields.items()},
         missing=tuple(missing),
-        extra={n: freeze(a) for n, a in parsed.extra.items()},
-        scalars={n: freeze(a) for n, a in scalar_arrays(parsed.scalars).items()},
-        scan_angle=header_angle(parsed.header, parsed.path, "ScanAngle"),
-        direction_offset=header_angle(parsed.header, parsed.path, "DirectionOffset"),
+        extra={n: freeze(a[keep]) for n, a in parsed.extra.items()},
+        scalars={n: freeze(a[keep]) for n, a in scalar_arrays(parsed.scalars).items()},
+        scan_angle=facts.scan_angle,
+        direction_offset=facts.direction_offset,
+        instrument=facts.instrument,
+        cone_angle=facts.cone_angle,
+        beam_azimuths=azimuths,
+        pitch=facts.pitch,
+        roll=facts.roll,
+        cnr_threshold=facts.cnr_threshold,
+        timezone=facts.timezone,
+        utc_offset_hours=facts.utc_offset_hours,
+        time_local=freeze(times.astype("datetime64[s]")),
+        time_convention="end",
+        period=period,
+        flags=freeze(flags),
+        z_wind=freeze(z_wind),
+        row_lines=freeze(parsed.row_lines[keep]),
+        warnings=tuple(messages),
+        min_availability=float(min_availability),
     )
 
 
@@ -239,10 +404,11 @@ def write_sta(
     per-altitude speed, dispersion, direction, Z-wind and availability columns.
 
     **Arguments:** `time` ``(t,)`` datetime64 (end of interval); `heights` ``(k,)`` m;
-    `speed`, `direction` ``(t, k)`` (m/s; meteorological degrees); optional `w`,
-    `speed_std` (m/s) and `availability` (percent) ``(t, k)``; optional `speed_min`,
-    `speed_max` and `w_std` (m/s) ``(t, k)`` add the min, max and Z-wind dispersion
-    columns (absent when not given); `scan_angle` and
+    `speed`, `direction` ``(t, k)`` (m/s; meteorological degrees); optional `w` (positive
+    up; written as the file's `Z-wind`, positive down), `speed_std` (m/s) and
+    `availability` (percent) ``(t, k)``; optional `speed_min`, `speed_max` and `w_std`
+    (m/s) ``(t, k)`` add the min, max and Z-wind dispersion columns (absent when not
+    given); `scan_angle` and
     `direction_offset` in degrees. NaN is written as ``NaN``.
 
     **Returns:** the path written.
@@ -255,7 +421,8 @@ def write_sta(
     heights = np.asarray(heights, dtype=np.float64)
     t, k = time.size, heights.size
     cols = {"Wind Speed (m/s)": speed, "Wind Speed Dispersion (m/s)": speed_std,
-            "Wind Direction (\u00b0)": direction, "Z-wind (m/s)": w,
+            "Wind Direction (\u00b0)": direction,
+            "Z-wind (m/s)": None if w is None else -np.asarray(w, dtype=np.float64),
             "Data Availability (%)": availability}
     optional = {"Wind Speed min (m/s)": speed_min, "Wind Speed max (m/s)": speed_max,
                 "Z-wind Dispersion (m/s)": w_std}
@@ -283,15 +450,14 @@ def write_sta(
         names += [f"{h}m {q}" for q in cols]
     lines.append("\t".join(names))
 
-    def num(v):
-        return "NaN" if not np.isfinite(v) else f"{v:.4f}"
-
+    # vectorised formatting: one (t, k * q) block of text, NaN written as ``NaN``
+    block = np.stack([arrays[q] for q in cols], axis=-1).reshape(t, -1)
+    text = np.char.mod("%.4f", block)
+    text[~np.isfinite(block)] = "NaN"
+    stamps = np.datetime_as_string(time.astype("datetime64[m]"), unit="m")
+    stamps = np.char.replace(np.char.replace(stamps, "-", "/"), "T", " ")
     for i in range(t):
-        stamp = str(time[i].astype("datetime64[m]")).replace("-", "/").replace("T", " ")
-        row = [stamp]
-        for j in range(k):
-            row += [num(arrays[q][i, j]) for q in cols]
-        lines.append("\t".join(row) + "\t")
+        lines.append(stamps[i] + "\t" + "\t".join(text[i].tolist()) + "\t")
     target = Path(path)
     with atomic_path(target) as tmp, open(tmp, "x", encoding="cp1252", newline="\n") as fh:
         fh.write("\n".join(lines) + "\n")

@@ -10,6 +10,9 @@ is independent of the lidarjax version that wrote it.
 from __future__ import annotations
 
 import json
+import math
+import os
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -49,18 +52,77 @@ def load_table(path: PathLike, *, return_metadata: bool = False):
     from ..response import ResponseTable
 
     p = require_file(path, "response table")
+    with open(p, "rb") as fh:  # our handle: closed even when numpy gives up half-way
+        try:
+            data = np.load(fh, allow_pickle=False)
+        except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message
+            raise file_error(p, None, f"not a NumPy .npz table file ({err}); write it with "
+                             "lidarjax table") from None
+        if not hasattr(data, "files"):
+            raise file_error(p, None, "a single NumPy array, not a lidarjax table (.npz); "
+                             "write it with lidarjax table")
+        try:
+            with data:
+                if "metadata" not in data or "response" not in data or "directions" not in data:
+                    raise file_error(p, None, "not a lidarjax table: expected arrays "
+                                     "'directions', 'response' and 'metadata' (write it with "
+                                     "lidarjax table)")
+                meta = _metadata(p, data["metadata"])
+                arrays = {n: data[n] for n in ("directions", "response", *_OPTIONAL)
+                          if n in data}
+        except (OSError, EOFError, zipfile.BadZipFile, KeyError, ValueError) as err:
+            if isinstance(err, ValueError) and str(err).startswith(os.fspath(p)):
+                raise  # our own message
+            raise file_error(p, None, f"corrupt table file ({err or type(err).__name__}); "
+                             "build it again with lidarjax table") from None
+    for name, a in arrays.items():
+        if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)) \
+                or a.dtype == np.float16:
+            raise file_error(p, None, f"array {name!r} has dtype {a.dtype}; a table holds real "
+                             "float32/float64 numbers (build it again with lidarjax table)")
     try:
-        data = np.load(p, allow_pickle=False)
-    except Exception as err:  # noqa: BLE001 - any unreadable file gets the same message
-        raise file_error(p, None, f"not a NumPy .npz table file ({err})") from None
-    with data:
-        if "metadata" not in data or "response" not in data or "directions" not in data:
-            raise file_error(p, None, "not a lidarjax table: expected arrays 'directions', "
-                             "'response' and 'metadata' (write it with lidarjax table)")
-        meta = json.loads(str(data["metadata"]))
-        if meta.get("format") != TABLE_FORMAT:
-            raise file_error(p, None, f"unknown table format {meta.get('format')!r}, expected "
-                             f"{TABLE_FORMAT!r}")
-        kwargs = {n: data[n] for n in _OPTIONAL if n in data}
-        table = ResponseTable(data["directions"], data["response"], **kwargs)
+        table = ResponseTable(arrays.pop("directions"), arrays.pop("response"), **arrays)
+    except ValueError as err:
+        raise file_error(p, None, f"inconsistent table ({err})") from None
     return (table, meta) if return_metadata else table
+
+
+#: Metadata keys `lidarjax correct` relies on, with the types they must have.
+_META_TYPES: dict[str, tuple[type, ...]] = {
+    "scan": (str,), "scan_method": (str,), "probe": (str,), "settings": (str,), "field": (str,),
+    "cone_angle_deg": (int, float), "gamma_deg": (int, float), "psi_deg": (int, float),
+    "epsilon_deg": (int, float), "pitch_deg": (int, float), "roll_deg": (int, float),
+    "probe_scale": (int, float), "n_beams": (int,), "vertical_beam": (bool,),
+    "heights_m": (list,), "beam_azimuths_deg": (list,), "cfd_files": (dict,),
+}
+
+
+def _metadata(path: Path, raw: np.ndarray) -> dict[str, Any]:
+    """The table's JSON metadata, checked: a dict whose known keys have the right types."""
+    if raw.dtype.kind not in "US" or raw.shape != ():
+        raise file_error(path, None, "the 'metadata' array must be one JSON text; build the "
+                         "table again with lidarjax table")
+    try:
+        meta = json.loads(str(raw))
+    except json.JSONDecodeError as err:
+        raise file_error(path, None, f"metadata is not valid JSON ({err}); build the table "
+                         "again with lidarjax table") from None
+    if not isinstance(meta, dict):
+        raise file_error(path, None, f"metadata must be a JSON object, found "
+                         f"{type(meta).__name__}; build the table again with lidarjax table")
+    if meta.get("format") != TABLE_FORMAT:
+        raise file_error(path, None, f"unknown table format {meta.get('format')!r}, expected "
+                         f"{TABLE_FORMAT!r}")
+    for key, types in _META_TYPES.items():
+        if key in meta and meta[key] is not None:
+            value = meta[key]
+            ok = isinstance(value, types) and not (bool not in types and isinstance(value, bool))
+            if ok and isinstance(value, (int, float)) and not math.isfinite(float(value)):
+                ok = False
+            if ok and key == "heights_m":
+                ok = all(isinstance(h, (int, float)) and not isinstance(h, bool) for h in value)
+            if not ok:
+                want = " or ".join(t.__name__ for t in types)
+                raise file_error(path, None, f"metadata {key!r} must be {want}, found "
+                                 f"{value!r}; build the table again with lidarjax table")
+    return meta

@@ -5,8 +5,21 @@ Two dialects are read, detected from the header line:
 - `;`-separated with decimal commas (`12,34`), typical of European locale exports;
 - `,`-separated with decimal points.
 
-(Tab-separated exports are accepted too.) Optional preamble lines before the header are
-kept. The header names a time column (`Time and Date`, `Timestamp`, `Date and Time`;
+(Tab-separated exports are accepted too.) Preamble lines before the header are kept and
+read for the time conventions:
+
+- **time-stamp position**: ZephIR 300 and ZX exports stamp the **start** of the averaging
+  period (the default); a preamble or time-column text such as `end of period` /
+  `Timestamp (end of interval)` switches to end-stamped;
+- **time zone**: `UTC+01:00`, `GMT-3`, `Time Zone: UTC-05:00` ... in the preamble or in the
+  time column's name (`Timestamp (UTC+1)`); none found means UTC (a note says so);
+- **averaging period**: `Averaging period: 10 min` / `... 60 s`; else the rows' median
+  spacing; else 10 minutes.
+
+`ZephirRecord.time` is always **UTC, end of interval** (start-stamped rows shifted by the
+period, the zone offset removed); `time_local` keeps the stamps as written.
+
+The header names a time column (`Time and Date`, `Timestamp`, `Date and Time`;
 formats `%d/%m/%Y %H:%M:%S`, `%Y-%m-%d %H:%M:%S`, with or without seconds) and per-height
 columns such as `Horizontal Wind Speed (m/s) at 38m`, `Wind Direction (deg) at 38m`,
 `Vertical Wind Speed (m/s) at 38m`: the height is found with the regular expression
@@ -22,22 +35,29 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import datetime as _dt
 import re
+import warnings
 from typing import Any
 
 import numpy as np
 from jaxtyping import Float, Shaped
 
 from ._common import (
+    BLOCKING_FLAGS,
     PathLike,
+    RecordFlag,
     file_error,
     freeze,
     import_optional,
     normalise_key,
+    offset_timedelta,
+    parse_times,
+    parse_utc_offset,
+    read_text,
     require_file,
+    summarise_lines,
 )
-from ._windcube import TimeParser
+from ._windcube import infer_bad_times, regular_step
 
 __all__ = ["ZEPHIR_MISSING", "ZephirRecord", "read_zephir_csv"]
 
@@ -56,7 +76,8 @@ TIME_FORMATS: tuple[str, ...] = (
     "%d.%m.%Y %H:%M",
 )
 
-_TIME_NAMES = ("timeanddate", "timestamp", "dateandtime", "datetime", "date", "time")
+_TIME_NAMES = ("timeanddate", "timestamp", "dateandtime", "datetime", "date", "time",
+               "timestampendofinterval", "timestampstartofinterval")
 _HEIGHT = re.compile(r"(\d+(\.\d+)?)\s*m(?![a-z/])", re.IGNORECASE)
 _ZEPHIR_NAMES: dict[str, tuple[str, ...]] = {
     "speed": ("Horizontal Wind Speed", "Wind Speed", "Hub Wind Speed"),
@@ -79,7 +100,7 @@ class ZephirRecord:
 
     - `path`; `delimiter` (`;`, `,` or tab) and `decimal` (`,` or `.`) as detected;
       `preamble`: lines before the header.
-    - `time`: `(t,)` `datetime64[s]`, as exported (ZephIR stamps usually the interval end).
+    - `time`: `(t,)` `datetime64[s]`, **UTC, end of interval** (see the module docstring).
     - `heights`: `(k,)` metres above the instrument, ascending.
     - `speed`: `(t, k)` horizontal wind speed, m/s.
     - `direction`: `(t, k)` wind direction, degrees, meteorological (from, clockwise from
@@ -89,6 +110,12 @@ class ZephirRecord:
     - `extra`: other per-height numeric quantities, normalised name -> `(t, k)`.
     - `scalars`: other columns, name as written -> `(t,)` float64 (9998/9999 -> NaN), or
       text when not numeric.
+    - `instrument`: `"zephir"`; `model`: `"zx"` / `"zephir_300"` / `""` from the preamble.
+    - `time_convention`: how the **file** stamps rows (`"start"` or `"end"`; `time` is
+      always end); `timezone`: the zone text found; `utc_offset_hours`: hours east of UTC.
+    - `time_local`: `(t,)` the stamps as written; `period`: the averaging period.
+    - `flags`: `(t, k)` `RecordFlag` bits (corrupt row, impossible value, duplicate time);
+      flagged values are NaN. `row_lines`: `(t,)` 1-based lines; `warnings`: messages.
     """
 
     path: str
@@ -103,6 +130,23 @@ class ZephirRecord:
     missing: tuple[str, ...]
     extra: dict[str, Float[np.ndarray, "t k"]]
     scalars: dict[str, Shaped[np.ndarray, " t"]]
+    instrument: str = "zephir"
+    model: str = ""
+    time_convention: str = "start"
+    timezone: str = ""
+    utc_offset_hours: float = 0.0
+    time_local: Any = None
+    period: Any = None
+    flags: Any = None
+    row_lines: Any = None
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def valid(self) -> Any:
+        """`(t, k)` True where speed and direction are finite and no blocking flag is set."""
+        flags = 0 if self.flags is None else self.flags
+        return (np.isfinite(self.speed) & np.isfinite(self.direction)
+                & ((flags & int(BLOCKING_FLAGS)) == 0))
 
     def __post_init__(self) -> None:
         t, k = self.time.shape[0], self.heights.shape[0]
@@ -128,8 +172,11 @@ class ZephirRecord:
 
 
 def _plain(name: str) -> str:
-    """Lower-case alphanumerics only, units kept: 'Timestamp (seconds)' -> 'timestampseconds'."""
-    return re.sub(r"[^0-9a-z]", "", name.lower())
+    """Lower-case alphanumerics, units dropped ('Timestamp (UTC+1)' -> 'timestamp') except a
+    seconds unit, which marks a numeric column ('Timestamp (seconds)' -> 'timestampseconds')."""
+    if re.search(r"\(\s*(s|sec|secs|seconds)\s*\)", name, re.IGNORECASE):
+        return re.sub(r"[^0-9a-z]", "", name.lower())
+    return normalise_key(name)
 
 
 def _height_of(name: str) -> tuple[float, str] | None:
@@ -160,106 +207,198 @@ def _detect(header_line: str) -> tuple[str, str]:
     return ",", "."
 
 
-def read_zephir_csv(path: PathLike) -> ZephirRecord:
-    """Read a ZephIR 10-minute CSV export (`;` + decimal comma, or `,` + decimal point).
+_START = re.compile(r"(start|beginning)\s+of\s+(the\s+)?(averag\w*\s+)?(period|interval|"
+                    r"averag)", re.IGNORECASE)
+_END = re.compile(r"end\s+of\s+(the\s+)?(averag\w*\s+)?(period|interval|averag)",
+                  re.IGNORECASE)
+_AVERAGING = re.compile(r"averag\w*[^0-9\n]{0,30}?(\d+(?:\.\d+)?)\s*(s|sec|seconds|min|"
+                        r"minutes|mins)\b", re.IGNORECASE)
 
-    The file is streamed (UTF-8, with or without BOM; undecodable bytes are replaced).
-    See the module docstring for the accepted columns.
+_AVERAGING_UNIT_FIRST = re.compile(r"averag\w*[^0-9\n(]{0,30}\(\s*(s|sec|seconds|min|minutes)"
+                                   r"\s*\)[^0-9\n]{0,5}(\d+(?:\.\d+)?)", re.IGNORECASE)
 
-    **Returns:** a `ZephirRecord` (fields, units and conventions there).
 
-    Raises `FileNotFoundError` for a missing path, and `ValueError` naming the file, the
-    line and the problem for: no header line with a time column, no per-height columns,
-    two columns with the same quantity and height, a row with the wrong number of
-    fields, an unparseable timestamp, or a non-numeric per-height value. With `;` as
-    delimiter, a `;`-decimal-`.` file is also read (points are accepted as decimals).
+def _conventions(texts: list[str], path) -> tuple[str, str, float, float | None, list[str]]:
+    """(convention, zone text, offset hours, period seconds or None, notes) from texts."""
+    notes: list[str] = []
+    joined = "\n".join(texts)
+    convention = "start"
+    if _END.search(joined) and not _START.search(joined):
+        convention = "end"
+    zone, offset = "", None
+    for t in texts:
+        if re.search(r"UTC|GMT|time\s*zone", t, re.IGNORECASE):
+            off = parse_utc_offset(t)
+            if off is not None:
+                zone, offset = t.strip()[:80], off
+                break
+    if offset is None:
+        offset = 0.0
+        notes.append(f"{path}: no time zone (e.g. 'UTC+01:00') in the preamble or the time "
+                     "column; times taken as UTC")
+    period = None
+    m = _AVERAGING.search(joined)
+    u = _AVERAGING_UNIT_FIRST.search(joined)
+    if u:
+        period = float(u.group(2)) * (60.0 if u.group(1).lower().startswith("m") else 1.0)
+    elif m:
+        period = float(m.group(1)) * (60.0 if m.group(2).lower().startswith("m") else 1.0)
+    return convention, zone, offset, period, notes
+
+
+def read_zephir_csv(
+    path: PathLike,
+    *,
+    time_convention: str | None = None,
+    utc_offset_hours: float | None = None,
+) -> ZephirRecord:
+    """Read a ZephIR 300 / ZX 10-minute CSV export (`;` + decimal comma, or `,` + point).
+
+    UTF-8 (with or without BOM) or cp1252. See the module docstring for the accepted
+    columns and the time conventions read from the preamble.
+
+    **Arguments:**
+
+    - `path`: the file.
+    - `time_convention`: `"start"` or `"end"` to override what the file says.
+    - `utc_offset_hours`: hours east of UTC to override the file's zone.
+
+    **Returns:** a `ZephirRecord`: times UTC, end of interval.
+
+    A corrupt row (wrong field count, unreadable time stamp, non-numeric per-height cell)
+    becomes a record of NaN flagged `RecordFlag.CORRUPT_ROW` (time inferred from regular
+    neighbours, or the row left out) with one `UserWarning` naming the file and lines;
+    negative speeds and directions outside [0, 360] are flagged `IMPOSSIBLE_VALUE` and set
+    NaN. Raises `FileNotFoundError` for a missing path, and a one-line `ValueError` naming
+    the file, the line and the fix for: an empty, binary or UTF-16 file, no header line
+    with a time column, no per-height columns, or a bad override.
     """
+    if time_convention not in (None, "start", "end"):
+        raise ValueError(f"time_convention must be 'start' or 'end', got {time_convention!r}")
+    if utc_offset_hours is not None and not (np.isfinite(utc_offset_hours)
+                                             and abs(utc_offset_hours) <= 14):
+        raise ValueError(f"utc_offset_hours must be finite and within +-14 h, got "
+                         f"{utc_offset_hours!r}")
     p = require_file(path, "ZephIR CSV file")
+    lines = read_text(p).splitlines()
+    if re.match(r"^\s*(HeaderSize|HeaderLength)\s*=", lines[0].lstrip("\ufeff"), re.IGNORECASE):
+        raise file_error(p, 1, "this is a Windcube file (HeaderSize=/HeaderLength=), not a "
+                         "ZephIR CSV export; read it with read_sta or read_rtd")
     preamble: list[str] = []
-    with open(p, encoding="utf-8-sig", errors="replace", newline="") as fh:
-        number = 0
-        header: list[str] | None = None
-        delimiter, decimal = ",", "."
-        for raw in fh:
-            number += 1
-            line = raw.rstrip("\r\n")
-            delimiter, decimal = _detect(line)
-            cells = next(csv.reader([line], delimiter=delimiter))
-            if any(_plain(c) in _TIME_NAMES for c in cells):
+    header: list[str] | None = None
+    delimiter, decimal = ",", "."
+    header_line = 0
+    candidate = None  # a line naming a time column but no height: used if nothing better
+    for number, line in enumerate(lines[:200], start=1):
+        delimiter, decimal = _detect(line)
+        cells = next(csv.reader([line], delimiter=delimiter), [])
+        if any(_plain(c) in _TIME_NAMES for c in cells):
+            if any(_height_of(c) for c in cells):
                 header = [c.strip() for c in cells]
+                header_line = number
                 break
-            preamble.append(line)
-            if number >= 200:
-                break
-        if header is None:
-            raise file_error(
-                p, None, "no header line naming a time column ('Time and Date' or "
-                "'Timestamp') in the first 200 lines"
-            )
-        header_line = number
-        keys = [_plain(c) for c in header]
-        time_col = next(
-            i for name in _TIME_NAMES for i, key in enumerate(keys) if key == name
+            if candidate is None:
+                candidate = (number, delimiter, decimal, [c.strip() for c in cells])
+        preamble.append(line)
+    if header is None and candidate is not None:
+        header_line, delimiter, decimal, header = candidate
+        preamble = preamble[: header_line - 1]
+    if header is None:
+        raise file_error(
+            p, None, "no header line naming a time column ('Time and Date' or "
+            "'Timestamp') in the first 200 lines; is this a ZephIR 10-minute CSV export?"
         )
-        per_height: list[tuple[int, float, str]] = []
-        scalar_cols: list[int] = []
-        seen: dict[tuple[float, str], str] = {}
-        for i, name in enumerate(header):
-            if i == time_col or not name:
-                continue
-            hq = _height_of(name)
-            if hq is None or not hq[1]:
-                scalar_cols.append(i)
-                continue
-            if hq in seen:
-                raise file_error(
-                    p, header_line, f"columns {seen[hq]!r} and {name!r} give the same "
-                    "quantity at the same height"
-                )
-            seen[hq] = name
-            per_height.append((i, *hq))
-        if not per_height:
-            raise file_error(
-                p, header_line, "no per-height columns such as 'Horizontal Wind Speed (m/s) "
-                "at 38m'"
-            )
-        heights = np.array(sorted({h for _, h, _ in per_height}), dtype=np.float64)
-        parse_time = TimeParser(TIME_FORMATS)
-        times: list[_dt.datetime] = []
-        rows: list[list[float]] = []
-        scalar_text: list[list[str]] = []
-        reader = csv.reader(fh, delimiter=delimiter)
-        for cells in reader:
-            line_no = header_line + reader.line_num
-            if not cells or all(not c.strip() for c in cells):
-                continue
-            if len(cells) < len(header):
-                raise file_error(
-                    p, line_no, f"expected {len(header)} fields separated by "
-                    f"{delimiter!r}, found {len(cells)}"
-                )
-            try:
-                times.append(parse_time(cells[time_col]))
-            except ValueError as err:
-                raise file_error(p, line_no, f"column {header[time_col]!r}: {err}") from None
-            row = []
-            for i, _, _ in per_height:
-                try:
-                    row.append(_value(cells[i], decimal))
-                except ValueError:
-                    # a ';' file written with decimal points still parses
-                    try:
-                        row.append(_value(cells[i], "."))
-                    except ValueError:
-                        raise file_error(
-                            p, line_no, f"column {header[i]!r}: expected a number, "
-                            f"found {cells[i].strip()!r}"
-                        ) from None
-            rows.append(row)
-            scalar_text.append([cells[i] for i in scalar_cols])
+    keys = [_plain(c) for c in header]
+    time_col = next(i for name in _TIME_NAMES for i, key in enumerate(keys) if key == name)
+    second_col = None  # a separate 'Time' column beside 'Date'
+    if keys[time_col] == "date" and "time" in keys:
+        second_col = keys.index("time")
+    per_height: list[tuple[int, float, str]] = []
+    scalar_cols: list[int] = []
+    seen: dict[tuple[float, str], str] = {}
+    notes: list[str] = []
+    for i, name in enumerate(header):
+        if i in (time_col, second_col) or not name:
+            continue
+        hq = _height_of(name)
+        if hq is None or not hq[1]:
+            scalar_cols.append(i)
+            continue
+        if hq in seen:
+            notes.append(f"{p}, line {header_line}: columns {seen[hq]!r} and {name!r} give "
+                         f"the same quantity at {hq[0]:g} m; the second is kept as "
+                         f"extra[{hq[1] + '#2'!r}]")
+            hq = (hq[0], hq[1] + "#2")
+        seen[hq] = name
+        per_height.append((i, *hq))
+    if not per_height:
+        raise file_error(
+            p, header_line, "no per-height columns such as 'Horizontal Wind Speed (m/s) "
+            "at 38m'"
+        )
+    convention, zone, offset, period_s, conv_notes = _conventions(
+        [*preamble, header[time_col]], p)
+    notes += conv_notes
+    if time_convention is not None:
+        convention = time_convention
+    if utc_offset_hours is not None:
+        offset, zone = float(utc_offset_hours), f"UTC{utc_offset_hours:+g} (given)"
+        notes = [n for n in notes if "no time zone" not in n]
+    model = ""
+    pre = "\n".join(preamble).lower()
+    if "zx" in pre:
+        model = "zx"
+    elif "zephir" in pre or "z300" in pre:
+        model = "zephir_300"
 
-    t, k = len(rows), heights.size
-    table = np.array(rows, dtype=np.float64).reshape(t, len(per_height))
+    heights = np.array(sorted({h for _, h, _ in per_height}), dtype=np.float64)
+    body = [(n, ln) for n, ln in enumerate(lines[header_line:], start=header_line + 1)
+            if ln.strip(" \t,;")]
+    n = len(body)
+    cells_list = list(csv.reader([ln for _, ln in body], delimiter=delimiter))
+    row_lines = np.array([ln for ln, _ in body], dtype=np.int64)
+    stamps = []
+    for cells in cells_list:
+        stamp = cells[time_col] if len(cells) > time_col else ""
+        if second_col is not None and len(cells) > second_col:
+            stamp = f"{stamp} {cells[second_col]}"
+        stamps.append(stamp)
+    local, time_ok = parse_times(stamps)
+    values = np.full((n, len(per_height)), np.nan)
+    row_ok = time_ok.copy()
+    problems: list[tuple[int, str]] = []
+    for r, cells in enumerate(cells_list):
+        why = None
+        if len(cells) < len(header):
+            why = f"expected {len(header)} fields separated by {delimiter!r}, found {len(cells)}"
+        elif len(cells) > len(header) and any(c.strip() for c in cells[len(header):]):
+            why = f"more fields than the {len(header)} columns (shifted row)"
+        elif not time_ok[r]:
+            why = f"unreadable time stamp {stamps[r].strip()[:40]!r}"
+        else:
+            for c, (i, _, _) in enumerate(per_height):
+                try:
+                    values[r, c] = _value(cells[i], decimal)
+                except ValueError:
+                    try:  # a ';' file written with decimal points still parses
+                        values[r, c] = _value(cells[i], ".")
+                    except ValueError:
+                        why = (f"column {header[i]!r}: expected a number, found "
+                               f"{cells[i].strip()[:30]!r}")
+                        break
+        if why is not None:
+            row_ok[r] = False
+            values[r] = np.nan
+            problems.append((int(row_lines[r]), why))
+
+    step = regular_step(local, time_ok)
+    local, inferred, keep = infer_bad_times(local, time_ok, step)
+    if period_s is None:
+        period = step if step is not None else np.timedelta64(600_000, "ms")
+    else:
+        period = np.timedelta64(int(round(period_s * 1000)), "ms")
+    t, k = int(keep.sum()), heights.size
+    values = values[keep]
     index = {h: j for j, h in enumerate(heights.tolist())}
     quantities: dict[str, np.ndarray] = {}
     extra: dict[str, np.ndarray] = {}
@@ -268,32 +407,74 @@ def read_zephir_csv(path: PathLike) -> ZephirRecord:
         target, name = (quantities, field) if field else (extra, key)
         if name not in target:
             target[name] = np.full((t, k), np.nan)
-        target[name][:, index[h]] = table[:, c]
+        target[name][:, index[h]] = values[:, c]
     fields = {}
     missing = []
     for name in ZEPHIR_FIELDS:
         if name in quantities:
-            fields[name] = freeze(quantities[name])
+            fields[name] = quantities[name]
         else:
-            fields[name] = freeze(np.full((t, k), np.nan))
+            fields[name] = np.full((t, k), np.nan)
             missing.append(name)
+    flags = np.zeros((t, k), dtype=np.int32)
+    flags[~row_ok[keep]] |= int(RecordFlag.CORRUPT_ROW)
+    flags[inferred[keep]] |= int(RecordFlag.TIME_INFERRED)
+    with np.errstate(invalid="ignore"):
+        impossible = ((fields["speed"] < 0) | (fields["direction"] < 0)
+                      | (fields["direction"] > 360))
+    flags[impossible] |= int(RecordFlag.IMPOSSIBLE_VALUE)
+    for name in ZEPHIR_FIELDS:
+        fields[name][impossible] = np.nan
+    local = local[keep]
+    if t > 1:
+        order = np.argsort(local, kind="stable")
+        same = local[order][1:] == local[order][:-1]
+        flags[order[1:][same]] |= int(RecordFlag.DUPLICATE_TIME)
+    utc_end = local - offset_timedelta(offset)
+    if convention == "start":
+        utc_end = utc_end + period
+    messages = [f"{p}, line {ln}: {why}; read as a flagged missing record"
+                for ln, why in problems]
+    if problems:
+        warnings.warn(
+            f"{p}: {len(problems)} corrupt row(s) at line(s) "
+            f"{summarise_lines([ln for ln, _ in problems])} read as flagged missing records "
+            f"(first: line {problems[0][0]}: {problems[0][1]}); every other row was read",
+            stacklevel=2,
+        )
+    for note in notes:
+        if "same quantity" in note:
+            warnings.warn(note, stacklevel=2)
     scalars: dict[str, np.ndarray] = {}
-    for j, col in enumerate(scalar_cols):
-        values = [r[j] for r in scalar_text]
+    for col in scalar_cols:
+        vals = [cells[col] if len(cells) > col else "" for cells, kk in zip(
+            cells_list, keep, strict=True) if kk]
         try:
-            arr = np.array([_value(v, decimal) for v in values], dtype=np.float64)
+            arr = np.array([_value(v, decimal) for v in vals], dtype=np.float64)
         except ValueError:
-            arr = np.array([v.strip() for v in values], dtype=str)
-        scalars[header[col]] = freeze(arr)
+            arr = np.array([v.strip() for v in vals], dtype=str)
+        name = header[col]
+        while name in scalars:
+            name += "#2"
+        scalars[name] = freeze(arr)
     return ZephirRecord(
         path=str(p),
         delimiter=delimiter,
         decimal=decimal,
         preamble=tuple(preamble),
-        time=freeze(np.array(times, dtype="datetime64[s]").reshape(t)),
+        time=freeze(utc_end.astype("datetime64[s]")),
         heights=freeze(heights),
-        **fields,
+        **{n_: freeze(a) for n_, a in fields.items()},
         missing=tuple(missing),
-        extra={n: freeze(a) for n, a in extra.items()},
+        extra={n_: freeze(a) for n_, a in extra.items()},
         scalars=scalars,
+        model=model,
+        time_convention=convention,
+        timezone=zone,
+        utc_offset_hours=float(offset),
+        time_local=freeze(local.astype("datetime64[s]")),
+        period=period.astype("timedelta64[s]"),
+        flags=freeze(flags),
+        row_lines=freeze(row_lines[keep]),
+        warnings=tuple(messages + notes),
     )

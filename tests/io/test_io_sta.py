@@ -14,7 +14,12 @@ def windcube_dir() -> Path:
     env = os.environ.get("LIDARJAX_WINDCUBE_DATA")
     if env:
         return Path(env)
-    return (Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "windcube").resolve()
+    root = Path(__file__).resolve().parents[2]
+    for base in (root.parent, root.parent.parent):  # main checkout, or a worktree beside it
+        folder = base / "shared" / "data" / "windcube"
+        if folder.is_dir():
+            return folder
+    return root.parent / "shared" / "data" / "windcube"
 
 
 def real_file(name: str) -> Path:
@@ -46,6 +51,7 @@ def test_real_file_2020_10_07():
     assert r.speed[0, 0] == 5.67 and r.speed_std[0, 0] == 0.49
     assert r.speed_min[0, 0] == 4.26 and r.speed_max[0, 0] == 7.01
     assert r.direction[0, 0] == 207.74 and r.w[0, 0] == 0.0 and r.w_std[0, 0] == 0.24
+    assert r.z_wind[0, 1] == 0.02 and r.w[0, 1] == -0.02  # Z-wind is positive down
     assert r.cnr[0, 0] == -10.94 and r.cnr_min[0, 0] == -11.79
     assert r.spectral_broadening[0, 0] == 0.05 and r.availability[0, 0] == 100.0
     assert r.speed[0, 1] == 6.38 and r.direction[0, 2] == 212.03
@@ -57,7 +63,11 @@ def test_real_file_2020_10_07():
     assert r.scalars["Int Temp (\u00b0C)"][0] == 11.9
     assert np.all(np.isnan(r.scalars["Vbatt (V)"]))  # the file's only NaN column
     assert r.scalars["Wiper count"][-1] == 1.0
-    assert np.all(r.valid)
+    # CNR above 0 dB at the top gates (cloud/fog): advisory flag, the wind is kept
+    assert np.all(r.valid[r.availability >= 80])
+    assert r.instrument == "windcube_v2" and r.cone_angle == 28.0 and r.cnr_threshold == -24
+    assert r.pitch == 0.08 and r.roll == -0.819 and r.utc_offset_hours == 0.0
+    assert r.period == np.timedelta64(600, "s") and r.time_convention == "end"
     with pytest.raises(ValueError):
         r.speed[0, 0] = 0.0  # read-only
 
@@ -74,7 +84,7 @@ def test_real_file_to_pandas():
     pytest.importorskip("pandas")
     r = read_sta(real_file(DAY1))
     df = r.to_pandas()
-    assert df.shape == (144 * 12, 2 + len(STA_FIELDS))
+    assert df.shape == (144 * 12, 3 + len(STA_FIELDS))
     assert list(df.columns[:3]) == ["time", "height", "speed"]
     assert df["speed"].iloc[0] == 5.67 and df["height"].iloc[11] == 220.0
     assert df["time"].iloc[12] == np.datetime64("2020-10-07T00:20:00")
@@ -149,7 +159,8 @@ def test_v1_fixture(tmp_path):
     np.testing.assert_array_equal(r.speed_max[:, 2], [7.0, 8.0, 9.0])
     assert np.isnan(r.speed[1, 1]) and r.speed[1, 0] == 6.0  # NaN stays NaN
     assert not r.valid[1, 1] and r.valid[1, 0]
-    np.testing.assert_allclose(r.w[0], [0.0, 0.1, 0.2])
+    np.testing.assert_allclose(r.w[0], [0.0, -0.1, -0.2])  # Z-wind is positive down
+    np.testing.assert_allclose(r.z_wind[0], [0.0, 0.1, 0.2])
     np.testing.assert_array_equal(r.cnr[0], [-20.0, -19.0, -18.0])
     assert r.missing == ("cnr_min", "spectral_broadening")
     assert np.all(np.isnan(r.cnr_min)) and np.all(np.isnan(r.spectral_broadening))
@@ -214,16 +225,10 @@ def test_no_altitudes_header_uses_columns(tmp_path):
     ("text", "line", "fragment"),
     [
         ("Version=1\n", 1, "expected 'HeaderSize=N' (Windcube V2) or 'HeaderLength=N' (V1)"),
-        ("HeaderSize=5\nA=1\nB=2\n", 3, "the header announced 5 lines but the file ends"),
-        ("HeaderSize=1\nA=1\n", 2, "expected the column-names line; the file ends"),
+        ("HeaderSize=5\nA=1\nB=2\n", 3, "no column-names line"),
+        ("HeaderSize=1\nA=1\n", 2, "no column-names line"),
         ("HeaderSize=1\nA=1\n2020/01/01 00:10\t1\n", 3,
          "expected the column-names line starting with 'Timestamp' or 'Date'"),
-        (v2_text(["2021/13/02 03:10\t1\t2\t\t3\t4\t"]), 8,
-         "column 'Timestamp (end of interval)': unrecognised timestamp '2021/13/02 03:10'"),
-        (v2_text(["2021/01/02 03:10\t1\t2\t\t3\t4\t", "2021/01/02 03:20\t1\toops\t\t3\t4\t"]), 9,
-         "column '40m Wind Direction (\u00b0)': expected a number, found 'oops'"),
-        (v2_text(["2021/01/02 03:10\t1\t2\t\t3"]), 8,
-         "expected at least 6 tab-separated fields, found 5"),
         (v2_text([], header=["Altitudes (m)=\t40\tsixty"]), 2,
          "'Altitudes (m)': expected altitudes in metres, found '40\\tsixty'"),
     ],
@@ -242,11 +247,6 @@ def test_column_errors(tmp_path):
     path = write_v2(tmp_path, v2_text([], columns=cols))
     with pytest.raises(ValueError, match=r"line 7: column '80m Wind Speed \(m/s\)': altitude 80 m "
                                          r"is not in the header's altitudes 40 60"):
-        read_sta(path)
-    cols = ["Timestamp", "40m Wind Speed (m/s)", "40 m Wind Speed(m/s)"]
-    path = write_v2(tmp_path, v2_text([], columns=cols))
-    with pytest.raises(ValueError, match="line 7: columns '40m Wind Speed \\(m/s\\)' and '40 m "
-                                         "Wind Speed\\(m/s\\)' give the same quantity"):
         read_sta(path)
     path = write_v2(tmp_path, v2_text([], columns=["Position", "40m CNR (dB)"]))
     with pytest.raises(ValueError, match="line 7: expected the column-names line starting with "
