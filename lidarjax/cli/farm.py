@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import finite_float, positive_float
+
 SCANS = ("windcube_v1", "windcube_v2", "zephir", "nacelle_2beam", "nacelle_4beam")
 
 
@@ -60,7 +62,7 @@ def register(sub) -> None:
                    help="turbine type CSV (# rotor_diameter, # hub_height, speed,ct columns); "
                         "once for all layouts or once per layout")
     where = p.add_mutually_exclusive_group(required=True)
-    where.add_argument("--lidar", nargs=3, type=float, metavar=("X", "Y", "Z"),
+    where.add_argument("--lidar", nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                        help="ground lidar position, CFD/UTM metres (Z: the lidar's height "
                             "above the ground datum)")
     where.add_argument("--nacelle", metavar="NAME",
@@ -69,26 +71,26 @@ def register(sub) -> None:
                    help="nacelle lidar looking downstream into its own wake")
     p.add_argument("--scan", choices=SCANS, default=None,
                    help="default windcube_v2 (ground) or nacelle_2beam (nacelle)")
-    p.add_argument("--cone-angle", type=float, default=None,
+    p.add_argument("--cone-angle", type=positive_float, default=None,
                    help="cone (ground) or half-angle (nacelle) in degrees (default: the scan's)")
     p.add_argument("--heights", type=_floats, default=None,
                    help="measurement heights above the lidar (ground; default: the mean hub "
                         "height) or distances along the axis (nacelle; default 2.5 D), m")
-    p.add_argument("--speed", type=float, default=10.0, help="free stream at hub height, m/s")
+    p.add_argument("--speed", type=positive_float, default=10.0, help="free stream at hub height, m/s")
     p.add_argument("--directions", type=_directions, default=_directions("0:360:2"),
                    help="START:STOP:STEP meteorological degrees (default 0:360:2)")
-    p.add_argument("--shear", type=float, default=0.0, help="power-law exponent (default 0)")
+    p.add_argument("--shear", type=finite_float, default=0.0, help="power-law exponent (default 0)")
     p.add_argument("--model", choices=("gaussian", "top_hat"), default="gaussian",
                    help="wake model (default gaussian: smooth in direction)")
     p.add_argument("--combination", choices=("sum_of_squares", "linear", "max"),
                    default="sum_of_squares")
-    p.add_argument("--expansion", type=float, default=None,
+    p.add_argument("--expansion", type=positive_float, default=None,
                    help="wake expansion k (default 0.05 top hat, 0.0325 gaussian)")
     p.add_argument("--yaw", action="append", default=[], metavar="NAME=DEG",
                    help="yaw misalignment of a turbine, degrees (repeatable)")
     p.add_argument("--probe", choices=("point", "pulsed", "cw"), default="pulsed",
                    help="probe volume (default pulsed)")
-    p.add_argument("--map-direction", type=float, default=None,
+    p.add_argument("--map-direction", type=finite_float, default=None,
                    help="direction of the wake map and probe points (default: the direction "
                         "with the largest speed correction)")
     p.add_argument("--out", required=True, help="output folder (created)")

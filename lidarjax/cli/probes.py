@@ -10,7 +10,16 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_probe_arguments, make_probe, make_scan, selected_betas, vector
+from ._common import (
+    add_probe_arguments,
+    finite_float,
+    make_probe,
+    make_scan,
+    positive_float,
+    positive_int,
+    selected_betas,
+    vector,
+)
 
 SCAN_CHOICES = ("windcube_v1", "windcube_v2", "zephir")
 
@@ -43,11 +52,11 @@ def register(sub) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     pr.add_argument("settings", help="the seed's settings.dat")
     which = pr.add_mutually_exclusive_group()
-    which.add_argument("--beta", type=float, help="platform rotation (default: the settings "
+    which.add_argument("--beta", type=finite_float, help="platform rotation (default: the settings "
                                                  "file's beta)")
     which.add_argument("--all", action="store_true", help="every beta row of the settings")
     pr.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v2")
-    pr.add_argument("--cone-angle", type=float, default=None,
+    pr.add_argument("--cone-angle", type=positive_float, default=None,
                     help="cone angle in degrees (default: the scan's)")
     pr.add_argument("--heights", type=_heights, default=None,
                     help="heights above the lidar, metres, 'h1,h2,...' (default: the "
@@ -55,12 +64,12 @@ def register(sub) -> None:
     add_probe_arguments(pr)
     pr.add_argument("--name", default="lidarProbes",
                     help="function-object name and file stem (default lidarProbes)")
-    pr.add_argument("--frequency", type=int, default=100,
+    pr.add_argument("--frequency", type=positive_int, default=100,
                     help="zCFD report frequency, solver cycles (default 100)")
     pr.add_argument("--sampled", default=None,
                     help="read mode: OpenFOAM probes output (postProcessing/<name>, a time "
                          "folder or its U file) or a CSV with columns name,u,v,w")
-    pr.add_argument("--time", type=float, default=None,
+    pr.add_argument("--time", type=finite_float, default=None,
                     help="read mode: the sampled time to use (default: the latest)")
     pr.add_argument("--u-ref", type=vector, default=(-15.0, 0.0, 0.0),
                     help="read mode: free stream u,v,w in the CFD frame, m/s (default -15,0,0)")

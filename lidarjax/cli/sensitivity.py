@@ -7,7 +7,13 @@ import argparse
 
 import numpy as np
 
-from ._common import add_run_arguments, field_paths, make_probe
+from ._common import (
+    add_run_arguments,
+    field_paths,
+    make_probe,
+    positive_float,
+    tilt_angle,
+)
 
 DEFAULT_OUTPUTS = "lidar_speed,lidar_direction,cff_U,cff_th"
 
@@ -36,14 +42,14 @@ def register(sub) -> None:
     sen.add_argument("--outputs", default=DEFAULT_OUTPUTS,
                      help=f"comma-separated outputs (default {DEFAULT_OUTPUTS}); also lidar_u, "
                           "lidar_v, lidar_w, cff_u, cff_v, cff_w, point_speed, cfp_U, cfp_th")
-    sen.add_argument("--pitch", type=float, default=0.0, help="nominal pitch, deg (default 0)")
-    sen.add_argument("--roll", type=float, default=0.0, help="nominal roll, deg (default 0)")
+    sen.add_argument("--pitch", type=tilt_angle, default=0.0, help="nominal pitch, deg (default 0)")
+    sen.add_argument("--roll", type=tilt_angle, default=0.0, help="nominal roll, deg (default 0)")
     sen.add_argument("--tilt-compensation", action="store_true",
                      help="the instrument compensates its tilt")
     sen.add_argument("--n-monte-carlo", type=int, default=0,
                      help="also a Monte Carlo of N samples per beta to check the linear "
                           "budget (5000 gives the standard uncertainty to about 1 %%)")
-    sen.add_argument("--ref-height", type=float, default=None,
+    sen.add_argument("--ref-height", type=positive_float, default=None,
                      help="H of z/H, m (default: the lidar's mean z, i.e. its height above "
                           "the CFD z = 0)")
     sen.add_argument("--out", default=".", help="output folder (default: .)")

@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import SCAN_CHOICES, add_probe_arguments, vector
+from ._common import (
+    SCAN_CHOICES,
+    add_probe_arguments,
+    finite_float,
+    positive_float,
+    positive_int,
+    vector,
+)
 
 
 def _ints(text: str) -> tuple[int, int, int]:
@@ -36,7 +43,7 @@ def register(sub) -> None:
                "--box-shape 8192,32,32 --box-spacing 2,4,4 --out series/",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("settings", help="the seed's settings.dat (location, angles, heights)")
-    p.add_argument("--beta", type=float, default=None,
+    p.add_argument("--beta", type=finite_float, default=None,
                    help="platform rotation row to use (default: the file's beta)")
     p.add_argument("--field", required=True,
                    help="mean flow: a CFD field file (.npz, .nc, Fluent ASCII) or 'uniform' "
@@ -49,24 +56,24 @@ def register(sub) -> None:
     p.add_argument("--box-shape", type=_ints, default=None, help="HAWC2 box nodes nx,ny,nz")
     p.add_argument("--box-spacing", type=vector, default=(4.0, 4.0, 4.0),
                    help="box node spacing dx,dy,dz in metres (default 4,4,4)")
-    p.add_argument("--length-scale", type=float, default=30.0, help="Mann L, m (default 30)")
-    p.add_argument("--gamma", type=float, default=3.9, help="Mann Gamma (default 3.9)")
-    p.add_argument("--ti", type=float, default=0.10,
+    p.add_argument("--length-scale", type=positive_float, default=30.0, help="Mann L, m (default 30)")
+    p.add_argument("--gamma", type=finite_float, default=3.9, help="Mann Gamma (default 3.9)")
+    p.add_argument("--ti", type=positive_float, default=0.10,
                    help="generated box: sigma_u = ti * advection speed (default 0.10)")
     p.add_argument("--seed", type=int, default=0, help="generated box: random seed")
     p.add_argument("--generator", choices=("builtin", "hipersim"), default="builtin",
                    help="box generator: lidarjax's numpy FFT (default) or hipersim (extra "
                         "'turbulence')")
-    p.add_argument("--speed", type=float, default=None,
+    p.add_argument("--speed", type=positive_float, default=None,
                    help="advection speed, m/s (default: the mean flow above the lidar at the "
                         "top height; required for --field uniform)")
-    p.add_argument("--direction", type=float, default=None,
+    p.add_argument("--direction", type=finite_float, default=None,
                    help="advection direction, degrees from CFD +y, meteorological (default: "
                         "the mean flow's there)")
     p.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v2")
-    p.add_argument("--cone-angle", type=float, default=None,
+    p.add_argument("--cone-angle", type=positive_float, default=None,
                    help="cone angle in degrees (default: the scan's)")
-    p.add_argument("--seconds-per-los", type=float, default=None,
+    p.add_argument("--seconds-per-los", type=positive_float, default=None,
                    help="override the scan's time per LOS (defaults: V1 1.5, V2 1.0, ZephIR "
                         "0.02 s)")
     p.add_argument("--tilt-compensation", action="store_true",
@@ -77,9 +84,9 @@ def register(sub) -> None:
     p.set_defaults(probe="auto")
     p.add_argument("--start", default="2024-01-01T00:00",
                    help="date and time of the first record's start (default 2024-01-01T00:00)")
-    p.add_argument("--hours", type=float, default=24.0,
+    p.add_argument("--hours", type=positive_float, default=24.0,
                    help="hours simulated, whole 10-minute records (default 24)")
-    p.add_argument("--chunk", type=int, default=36, help="records per compiled batch")
+    p.add_argument("--chunk", type=positive_int, default=36, help="records per compiled batch")
     p.add_argument("--no-plots", action="store_true", help="skip the figure")
     p.add_argument("--out", default=".", help="output folder (default: .)")
     p.set_defaults(func=run)

@@ -7,7 +7,15 @@ import sys
 
 import numpy as np
 
-from ._common import add_run_arguments, add_tilt_arguments, field_paths, make_probe, make_scan, selected_betas
+from ._common import (
+    add_run_arguments,
+    add_tilt_arguments,
+    field_paths,
+    finite_float,
+    make_probe,
+    make_scan,
+    selected_betas,
+)
 
 
 def register(sub) -> None:
@@ -21,7 +29,7 @@ def register(sub) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     sim.add_argument("settings", help="the seed's settings.dat")
     which = sim.add_mutually_exclusive_group()
-    which.add_argument("--beta", type=float, help="platform rotation to run (default: the "
+    which.add_argument("--beta", type=finite_float, help="platform rotation to run (default: the "
                                                  "settings file's beta)")
     which.add_argument("--all", action="store_true", help="run every beta row, one batch")
     add_run_arguments(sim, default_scan="windcube_v1")
