@@ -58,6 +58,7 @@ import numpy as np
 from .io._common import BLOCKING_FLAGS, MIN_AVAILABILITY, RecordFlag
 
 __all__ = ["RecordFlag", "RecordSet", "CorrectedRecords", "load_records", "check_instrument",
+           "tilt_difference",
            "match_heights", "reported_noise", "correct_records", "write_corrected_csv",
            "write_corrected_netcdf", "quality_summary", "SCAN_PERIOD_S",
            "DEFAULT_MIN_AVAILABILITY"]
@@ -353,6 +354,23 @@ def check_instrument(metadata: dict, table, records: RecordSet, *,
             out.append(f"{name}: table {float(tv):g} deg, record header {rv:g} deg "
                        "(build the table with --pitch/--roll)")
     return out
+
+
+def tilt_difference(metadata: dict, records: RecordSet, *, threshold: float = 0.05) -> str | None:
+    """One line when the record header's tilt (PitchAngle, RollAngle) differs from the
+    table's mount by more than `threshold` degrees (within `check_instrument`'s tolerance,
+    else that refuses), or None."""
+    diffs, parts = [], []
+    for name, key in (("pitch", "pitch_deg"), ("roll", "roll_deg")):
+        tv, rv = metadata.get(key, 0.0), getattr(records, name, math.nan)
+        if not isinstance(tv, (int, float)) or not math.isfinite(rv):
+            continue
+        diffs.append(abs(float(tv) - rv))
+        parts.append(f"{name} {rv:g} deg in the record header, {float(tv):g} in the table")
+    if not diffs or max(diffs) <= threshold:
+        return None
+    return ("tilt: " + "; ".join(parts) + " (lidarjax table --heights-from RECORDS "
+            "--tilt-from-records builds the table with the record's tilt)")
 
 
 def table_warnings(metadata: dict) -> list[str]:

@@ -66,6 +66,25 @@ def test_real_rtd_is_cnr_filtered_like_the_instrument(tmp_path, capsys):
     # and must not enter (unfiltered, the correction gave 4.1 m/s from 142 degrees)
     assert at40[1, 0] == "2024-08-03T03:00:00Z"
     assert abs(speed[1] - 7.49) < 0.1 and abs(direction[1] - 91.6) < 1.5, (speed, direction)
+    # the header's tilt (PitchAngle=0.379, RollAngle=0.262) differs from the level table: shown
+    err = capsys.readouterr().err
+    assert "tilt: pitch 0.379 deg in the record header, 0 in the table; roll 0.262" in err
+
+
+def test_tilt_from_record_headers(tmp_path):
+    """`table --tilt-from-records` takes the header's pitch and roll; `correct` stays quiet
+    about the tilt when the table has it."""
+    from argparse import Namespace
+
+    from lidarjax.cli.table import _tilt_from
+    from lidarjax.records import load_records, tilt_difference
+
+    rec = load_records(real_file("WLS866-104_2024_08_02__23_44_55.rtd"))
+    args = Namespace(pitch=0.0, roll=0.0, heights_from="x.rtd")
+    _tilt_from(args, rec)
+    assert (args.pitch, args.roll) == (0.379, 0.262)
+    assert tilt_difference({"pitch_deg": 0.379, "roll_deg": 0.262}, rec) is None
+    assert "pitch 0.379" in tilt_difference({"pitch_deg": 0.0, "roll_deg": 0.0}, rec)
 
 
 def test_real_sta_every_record_comes_back(tmp_path, capsys):

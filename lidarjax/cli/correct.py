@@ -55,6 +55,7 @@ def run(args) -> int:
         load_records,
         quality_summary,
         table_warnings,
+        tilt_difference,
         write_corrected_csv,
         write_corrected_netcdf,
     )
@@ -99,6 +100,9 @@ def run(args) -> int:
         say(f"warning: {w}")
     for m in mismatch:
         say(f"warning: mismatch allowed: {m}")
+    tilt = tilt_difference(meta, rec)
+    if tilt:
+        say(tilt)
     result = correct_records(table, records, records=rec, noise=args.noise,
                              progress=progress, scan_period_s=args.scan_period)
     if result.record_only_heights:

@@ -33,10 +33,29 @@ def register(sub) -> None:
                               "(default: the settings file's)")
     heights.add_argument("--heights-from", default=None, metavar="RECORDS",
                          help="take the heights from a record file (.sta, .rtd or ZephIR .csv)")
+    tab.add_argument("--tilt-from-records", action="store_true",
+                     help="with --heights-from: take --pitch and --roll from the record "
+                          "header's PitchAngle and RollAngle (taken in lidarjax's convention: "
+                          "positive pitch raises the S0 side, positive roll lowers S1)")
     tab.add_argument("--out", required=True, help="table file to write (.npz); an existing "
                      "file is replaced atomically, an input never")
     add_dask_arguments(tab)
     tab.set_defaults(func=run)
+
+
+def _tilt_from(args, rec) -> None:
+    """Set ``args.pitch`` / ``args.roll`` from a record header (`--tilt-from-records`)."""
+    import math
+    import sys
+
+    got = {k: float(getattr(rec, k, math.nan)) for k in ("pitch", "roll")}
+    missing = [k for k, v in got.items() if not math.isfinite(v)]
+    if missing:
+        raise ValueError(f"--tilt-from-records: {args.heights_from} states no "
+                         f"{' or '.join(missing)} angle in its header; give --pitch/--roll")
+    args.pitch, args.roll = got["pitch"], got["roll"]
+    print(f"tilt from {args.heights_from}: pitch {args.pitch:g} deg, roll {args.roll:g} deg",
+          file=sys.stderr)
 
 
 def _record_heights(path):
@@ -100,10 +119,15 @@ def run(args) -> int:
     rec = None
     if args.heights_from is not None:
         inputs.append(("--heights-from", args.heights_from))
+    if args.tilt_from_records and args.heights_from is None:
+        raise ValueError("--tilt-from-records needs --heights-from RECORDS (the file whose "
+                         "header gives the tilt)")
     out = check_output_file(args.out, inputs=inputs)
     if args.heights_from is not None:
         rec = _record_heights(args.heights_from)
         settings = settings.with_heights(rec.heights)
+        if args.tilt_from_records:
+            _tilt_from(args, rec)
     elif args.heights is not None:
         settings = settings.with_heights(args.heights)
     meta = table_metadata(args, settings, scan, paths, settings.heights())
