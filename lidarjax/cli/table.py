@@ -105,7 +105,7 @@ def run(args) -> int:
     import numpy as np
 
     from ..io import read_settings, save_table
-    from ..io.fields import load_field
+    from ..io.fields import check_field_file, load_field
     from ..records import check_instrument
     from ..workflow import build_table, table_region
 
@@ -136,6 +136,8 @@ def run(args) -> int:
         if bad:
             raise ValueError(f"--heights-from {args.heights_from}: the record does not match "
                              f"the table being built: {'; '.join(bad)}")
+    for path in paths.values():  # every file's format checked before computing
+        check_field_file(path)
     # one run at a time, each read only where the beams look (peak memory about one run)
     region = table_region(settings, betas, scan, probe=probe, pitch=args.pitch, roll=args.roll)
     print(f"simulating {len(betas)} CFD runs x {settings.nh} heights ({args.scan}, "

@@ -213,6 +213,49 @@ def _gridded(path: Path, fmt: str, x, y, z, velocity) -> FieldArrays:
     return FieldArrays(x, y, z, vel, report)
 
 
+def check_field_file(path: PathLike) -> None:
+    """Cheap checks of a CFD field file before any computation, without reading its data:
+    for ``.npz`` archives the members (x, y, z and velocity or u, v, w) and their dtypes from
+    the array headers (complex, float16 and non-numeric velocities refused). Other formats
+    are checked when they are read. Raises `ValueError` naming the file."""
+    path = Path(path)
+    if path.suffix.lower() != ".npz" or not path.is_file():
+        return
+    with open(path, "rb") as fh:
+        try:
+            archive = np.load(fh, allow_pickle=False)
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
+            raise ValueError(f"{os.fspath(path)}: not a readable .npz archive ({err})") from None
+        if not hasattr(archive, "files"):
+            raise ValueError(f"{os.fspath(path)}: a single array (.npy), not an .npz archive "
+                             "with x, y, z and velocity")
+        with archive as data:
+            names = set(data.files)
+            wanted = ["x", "y", "z", "velocity"] if {"x", "y", "z", "velocity"} <= names \
+                else ["x", "y", "z", "u", "v", "w"]
+            missing = [n for n in wanted if n not in names]
+            if missing:
+                raise ValueError(
+                    f"{os.fspath(path)}: missing arrays {', '.join(missing)}; expected x, y, z "
+                    f"and u, v, w (or velocity), found {', '.join(sorted(names)) or 'none'}")
+            try:
+                for n in wanted:
+                    with data.zip.open(f"{n}.npy") as member:
+                        version = np.lib.format.read_magic(member)
+                        read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                                else np.lib.format.read_array_header_2_0)
+                        _, _, dtype = read(member)
+                    _check_real(path, n, np.empty(0, dtype))
+            except (OSError, EOFError, zipfile.BadZipFile, KeyError) as err:
+                raise ValueError(f"{os.fspath(path)}: corrupt .npz archive ({err}); write the "
+                                 "field again") from None
+            except ValueError as err:
+                if str(err).startswith(os.fspath(path)):
+                    raise
+                raise ValueError(f"{os.fspath(path)}: corrupt .npz archive ({err}); write the "
+                                 "field again") from None
+
+
 def _read_npz(path: Path) -> FieldArrays:
     with open(path, "rb") as fh:  # our handle: closed even when numpy gives up half-way
         try:
