@@ -245,7 +245,9 @@ def _read_vector_field(path: Path, mesh: PolyMesh) -> tuple[np.ndarray, Boundary
             raise file_error(cur.path, cur.line(bpos) if boundary is not None else None,
                              f"boundaryField has no entry for patch {name!r}")
         btype = str(entry.get("type", ""))
-        if "value" in entry and btype not in _SLIP_TYPES:
+        if btype == "noSlip":  # fixed zero velocity; OpenFOAM writes no `value` for it
+            values[name] = np.zeros((n, 3))
+        elif "value" in entry and btype not in _SLIP_TYPES:
             values[name] = _as_vectors(entry["value"], n, cur, f"boundaryField {name} value")
         elif btype in _SLIP_TYPES:
             values[name] = "slip"
