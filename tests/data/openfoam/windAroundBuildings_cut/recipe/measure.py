@@ -1,11 +1,19 @@
+# ruff: noqa
+# Recipe script as run for tests/data/openfoam (paths are those of the run; adapt them).
 """windAroundBuildings: load_field time, LOS vs OpenFOAM probes, NaN inside buildings."""
-import sys, time, json
-import numpy as np, jax
+import json
+import sys
+import time
+
+import jax
+import numpy as np
+
 jax.config.update("jax_enable_x64", True)
 import lidarjax as lj
 from lidarjax.frames import lidar_to_cfd_rotation, rotate
-from lidarjax.io.probes import read_probe_csv, read_openfoam_probes
 from lidarjax.io.openfoam import read_openfoam_field, sample_openfoam
+from lidarjax.io.probes import read_openfoam_probes, read_probe_csv
+
 case = sys.argv[1]; pdir = sys.argv[2]
 locs = read_probe_csv('/work/f11_of/probes/lidarProbes.csv')
 of = read_openfoam_probes(pdir).values_for(locs)
@@ -34,6 +42,11 @@ for lab, loc in mounts.items():
         ref[np.searchsorted(heights, locs.height[r]), locs.beam[r]] = of[r] @ n[locs.beam[r]]
     d = los - ref
     ok = np.isfinite(d)
+    order = np.argsort(-np.abs(np.nan_to_num(d)).ravel())[:6]
+    print(lab, "worst:", [(float(heights[i // d.shape[1]]), int(i % d.shape[1]), round(float(d.ravel()[i]), 4)) for i in order])
+    for hmin in (10.0, 20.0, 30.0):
+        sel = ok & (heights[:, None] >= hmin)
+        print(lab, f"h>={hmin}: rms", float(np.sqrt(np.mean(d[sel] ** 2))), "max", float(np.abs(d[sel]).max()))
     # NaN inside buildings: grid nodes inside the solid
     g = np.asarray(field.values) if hasattr(field, "values") else None
     out[lab] = dict(load_s=tl, grid=list(np.shape(field.velocity)[:3]),

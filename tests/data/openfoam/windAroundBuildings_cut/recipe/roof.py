@@ -1,4 +1,7 @@
+# ruff: noqa
+# Recipe script as run for tests/data/openfoam (paths are those of the run; adapt them).
 import numpy as np
+
 v=[];f=[]
 for l in open('constant/triSurface/buildings.obj'):
     if l.startswith('v '): v.append([float(x) for x in l.split()[1:4]])
