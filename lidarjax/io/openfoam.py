@@ -5,8 +5,11 @@ binary files (label and scalar widths from the header's `arch`), gzip-compressed
 (`points.gz` ...), `faceList` and `faceCompactList` faces, polyhedral cells,
 `internalField uniform (...)` and `nonuniform List<vector>`, and the boundary values of
 every patch. The latest time directory holding the field is used unless `time` is given.
-A decomposed case (only `processor*/` directories) must be reconstructed first
-(`reconstructParMesh -constant && reconstructPar -latestTime`).
+A decomposed case (only `processor*/` directories, as `decomposePar` writes them) is read
+without `reconstructPar`: each processor's mesh and field are merged into the undecomposed
+mesh through `decomposePar`'s `pointProcAddressing`, `faceProcAddressing` and
+`cellProcAddressing`, so the result is the original mesh, point values on processor
+boundaries included (exact, as if reconstructed).
 
 Sampling follows OpenFOAM's own `cellPoint` interpolation (see `lidarjax.io._cells`): the
 values lidarjax sees are those that OpenFOAM's `probes` function object with
@@ -77,11 +80,8 @@ def _case_dir(path: PathLike) -> Path:
         raise FileNotFoundError(f"OpenFOAM case directory not found: {os.fspath(path)}")
     mesh = p / "constant" / "polyMesh"
     if not mesh.is_dir():
-        if (p / "processor0").is_dir():
-            raise ValueError(
-                f"{os.fspath(p)}: a decomposed OpenFOAM case (processor* directories only); "
-                "reconstruct it first: reconstructParMesh -constant && reconstructPar -latestTime"
-            )
+        if (p / "processor0" / "constant" / "polyMesh").is_dir():
+            return p
         raise ValueError(f"{os.fspath(p)}: not an OpenFOAM case (no constant/polyMesh directory)")
     return p
 
@@ -98,14 +98,19 @@ def openfoam_times(case: PathLike, field: str = "U") -> list[str]:
     """Names of the case's time directories that hold `field` (plain or `.gz`), in
     increasing time order."""
     p = _case_dir(case)
+    if _is_decomposed(p):
+        p = p / "processor0"
     times = [d.name for d in p.iterdir() if d.is_dir() and _is_time_name(d.name)
              and resolve_file(d / field) is not None]
     return sorted(times, key=float)
 
 
 def read_openfoam_mesh(case: PathLike) -> PolyMesh:
-    """Read `constant/polyMesh` (points, faces, owner, neighbour, boundary) of a case."""
+    """Read `constant/polyMesh` (points, faces, owner, neighbour, boundary) of a case
+    (of a decomposed case: the undecomposed mesh, merged from the processors)."""
     p = _case_dir(case)
+    if _is_decomposed(p):
+        return _merge_meshes(p, *_processor_meshes(p))[0]
     d = p / "constant" / "polyMesh"
     cur = open_file(d / "points")
     points = cur.read_list(3, np.float64, "point")
@@ -161,6 +166,8 @@ def _read_boundary(path: Path, n_faces: int, n_internal: int) -> tuple[tuple[str
 
 
 def _pick_time(p: Path, field: str, time: Any) -> str:
+    if _is_decomposed(p):
+        p = p / "processor0"
     times = openfoam_times(p, field)
     if time is None or time == "latestTime":
         if not times:
@@ -238,7 +245,9 @@ def _read_vector_field(path: Path, mesh: PolyMesh) -> tuple[np.ndarray, Boundary
             raise file_error(cur.path, cur.line(bpos) if boundary is not None else None,
                              f"boundaryField has no entry for patch {name!r}")
         btype = str(entry.get("type", ""))
-        if "value" in entry and btype not in _SLIP_TYPES:
+        if btype == "noSlip":  # fixed zero velocity; OpenFOAM writes no `value` for it
+            values[name] = np.zeros((n, 3))
+        elif "value" in entry and btype not in _SLIP_TYPES:
             values[name] = _as_vectors(entry["value"], n, cur, f"boundaryField {name} value")
         elif btype in _SLIP_TYPES:
             values[name] = "slip"
@@ -311,12 +320,20 @@ def read_openfoam_field(case: PathLike, *, field: str = "U", time: Any = None) -
     - `time`: a time (number) or time-directory name; default the latest holding `field`.
 
     Raises `ValueError` naming the file (and line) for a missing field, no time directory,
-    a corrupt or truncated file, or a decomposed case.
+    a corrupt or truncated file, or a decomposed case without `decomposePar`'s addressing.
+    A decomposed case (`processor*/` only) is merged into the undecomposed mesh.
     """
     p = _case_dir(case)
+    if _is_decomposed(p):
+        for what in ("pointProcAddressing", "faceProcAddressing", "cellProcAddressing"):
+            if resolve_file(p / "processor0" / "constant" / "polyMesh" / what) is None:
+                _read_labels(p / "processor0" / "constant" / "polyMesh" / what, what)  # raises
     name = _pick_time(p, field, time)
-    mesh = read_openfoam_mesh(p)
-    values, boundary = _read_vector_field(p / name / field, mesh)
+    if _is_decomposed(p):
+        mesh, values, boundary = _read_decomposed(p, name, field)
+    else:
+        mesh = read_openfoam_mesh(p)
+        values, boundary = _read_vector_field(p / name / field, mesh)
     return OpenFOAMField(case=p, time=name, field=field, mesh=mesh, cell_values=values,
                          boundary=boundary)
 
@@ -493,3 +510,157 @@ def resample_openfoam(
         info["resample_error_rms"] = float(np.sqrt(np.mean(err ** 2))) if err.size else math.nan
         info["resample_error_max"] = float(err.max()) if err.size else math.nan
     return axes, velocity, info
+
+
+# ---------------------------------------------------------------- decomposed cases
+
+
+def _is_decomposed(p: Path) -> bool:
+    return not (p / "constant" / "polyMesh").is_dir() and (p / "processor0" / "constant" / "polyMesh").is_dir()
+
+
+def _processor_dirs(p: Path) -> list[Path]:
+    procs = sorted((d for d in p.iterdir() if d.is_dir() and re.fullmatch(r"processor\d+", d.name)),
+                   key=lambda d: int(d.name[9:]))
+    if [int(d.name[9:]) for d in procs] != list(range(len(procs))):
+        raise ValueError(f"{os.fspath(p)}: processor directories are not numbered 0..{len(procs) - 1}")
+    return procs
+
+
+def _read_labels(path: Path, what: str) -> np.ndarray:
+    if resolve_file(path) is None:
+        raise ValueError(
+            f"{os.fspath(path)}: missing; a decomposed case is merged through decomposePar's "
+            "*ProcAddressing files (a case meshed or run in parallel without them must be "
+            "reconstructed: reconstructParMesh -constant && reconstructPar -latestTime)")
+    return open_file(path).read_list(1, np.int64, what)
+
+
+def _processor_meshes(p: Path):
+    procs = _processor_dirs(p)
+    meshes, addr = [], []
+    for d in procs:
+        m = read_openfoam_mesh(d)
+        pm = d / "constant" / "polyMesh"
+        pa = _read_labels(pm / "pointProcAddressing", "pointProcAddressing")
+        fa = _read_labels(pm / "faceProcAddressing", "faceProcAddressing")
+        ca = _read_labels(pm / "cellProcAddressing", "cellProcAddressing")
+        if pa.size != m.points.shape[0] or fa.size != m.n_faces or ca.size != m.n_cells:
+            raise ValueError(f"{os.fspath(pm)}: *ProcAddressing sizes ({pa.size}, {fa.size}, {ca.size}) "
+                             f"do not match the processor mesh ({m.points.shape[0]} points, "
+                             f"{m.n_faces} faces, {m.n_cells} cells)")
+        meshes.append(m)
+        addr.append((pa, fa, ca))
+    return procs, meshes, addr
+
+
+def _merge_meshes(p: Path, procs, meshes, addr):
+    """The undecomposed mesh from the processor meshes and decomposePar's addressing.
+
+    `faceProcAddressing` holds ``±(global face + 1)``: positive where the processor face has
+    the global face's orientation, negative where it is flipped (the neighbour side of a
+    processor patch). Every global face appears once with a positive sign; its points are
+    taken from there. Global patches are the processors' non-processor patches (same names and
+    order on every processor); their global face ranges follow from the addressing."""
+    where = os.fspath(p)
+    n_points = 1 + max(int(a[0].max(initial=-1)) for a in addr)
+    n_cells = 1 + max(int(a[2].max(initial=-1)) for a in addr)
+    n_faces = max(int(np.abs(a[1]).max(initial=0)) for a in addr)
+    points = np.full((n_points, 3), np.nan)
+    owner = np.full(n_faces, -1, np.int64)
+    neighbour_all = np.full(n_faces, -1, np.int64)
+    sizes = np.zeros(n_faces, np.int64)
+    seen = np.zeros(n_faces, np.int64)
+    global_patches: list[tuple[str, str]] = []
+    patch_faces: dict[str, list[np.ndarray]] = {}
+    for d, m, (pa, fa, ca) in zip(procs, meshes, addr, strict=True):
+        points[pa] = m.points
+        g = np.abs(fa) - 1
+        pos = fa > 0
+        lo = np.arange(m.n_faces)
+        own_g = ca[m.owner]
+        owner[g[pos]] = own_g[pos]
+        neighbour_all[g[~pos]] = own_g[~pos]
+        ni = m.n_internal
+        nb_g = ca[m.neighbour]
+        neighbour_all[g[:ni][pos[:ni]]] = nb_g[pos[:ni]]
+        owner[g[:ni][~pos[:ni]]] = nb_g[~pos[:ni]]
+        sizes[g[pos]] = m.face_offsets[lo[pos] + 1] - m.face_offsets[lo[pos]]
+        np.add.at(seen, g[pos], 1)
+        names = []
+        for name, ptype, start, n in m.patches:
+            if ptype in ("processor", "processorCyclic"):
+                continue
+            names.append((name, ptype))
+            patch_faces.setdefault(name, []).append(g[start:start + n])
+        if not global_patches:
+            global_patches = names
+        elif [n for n, _ in names] != [n for n, _ in global_patches]:
+            raise ValueError(f"{os.fspath(d)}: its patches differ from processor0's")
+    if np.isnan(points).any() or (seen != 1).any() or (owner < 0).any():
+        raise ValueError(f"{where}: the processors' *ProcAddressing do not describe one mesh "
+                         "(reconstruct it: reconstructParMesh -constant && reconstructPar -latestTime)")
+    offsets = np.zeros(n_faces + 1, np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    labels = np.empty(offsets[-1], np.int64)
+    for m, (pa, fa, _ca) in zip(meshes, addr, strict=True):
+        lf = np.flatnonzero(fa > 0)
+        s = m.face_offsets[lf + 1] - m.face_offsets[lf]
+        k = np.arange(s.sum()) - np.repeat(np.cumsum(s) - s, s)
+        labels[np.repeat(offsets[fa[lf] - 1], s) + k] = pa[m.face_labels[np.repeat(m.face_offsets[lf], s) + k]]
+    patches = []
+    n_internal = n_faces
+    for name, ptype in global_patches:
+        gf = np.concatenate(patch_faces[name]) if patch_faces[name] else np.zeros(0, np.int64)
+        start = int(gf.min()) if gf.size else -1
+        if gf.size and (int(gf.max()) - start + 1 != gf.size):
+            raise ValueError(f"{where}: the faces of patch {name!r} are not contiguous in the merged mesh")
+        patches.append([name, ptype, start, int(gf.size)])
+        if gf.size:
+            n_internal = min(n_internal, start)
+    nxt = n_internal  # empty patches: place them where the next one starts, as OpenFOAM does
+    for pt in patches:
+        if pt[3] == 0:
+            pt[2] = nxt
+        nxt = pt[2] + pt[3]
+    neighbour = neighbour_all[:n_internal]
+    if (neighbour < 0).any() or (neighbour_all[n_internal:] >= 0).any():
+        raise ValueError(f"{where}: inconsistent internal/boundary faces in the merged mesh")
+    mesh = PolyMesh(points=points, face_offsets=offsets, face_labels=labels, owner=owner,
+                    neighbour=neighbour, n_cells=n_cells,
+                    patches=tuple((a, b, c, e) for a, b, c, e in patches))
+    return mesh, patch_faces
+
+
+def _read_decomposed(p: Path, time: str, field: str):
+    procs, meshes, addr = _processor_meshes(p)
+    mesh, patch_faces = _merge_meshes(p, procs, meshes, addr)
+    values = np.full((mesh.n_cells, 3), np.nan)
+    bvals: dict[str, Any] = {}
+    starts = {name: (start, n) for name, _t, start, n in mesh.patches}
+    for d, m, (_pa, fa, ca) in zip(procs, meshes, addr, strict=True):
+        path = d / time / field
+        if resolve_file(path) is None:
+            raise ValueError(f"{os.fspath(path)}: missing (every processor needs the time {time!r})")
+        internal, bv = _read_vector_field(path, m)
+        values[ca] = internal
+        for (name, ptype, start, n) in m.patches:
+            if ptype in ("processor", "processorCyclic") or name not in starts:
+                continue
+            v = bv.values[name]
+            gstart, gn = starts[name]
+            if isinstance(v, str):
+                bvals.setdefault(name, v)
+                continue
+            cur = bvals.get(name)
+            if not isinstance(cur, np.ndarray):
+                cur = bvals[name] = np.full((gn, 3), np.nan)
+            cur[(np.abs(fa[start:start + n]) - 1) - gstart] = v
+    for name, _t, _s, _n in mesh.patches:
+        v = bvals.get(name, "cell")
+        if isinstance(v, np.ndarray) and np.isnan(v).any():
+            raise ValueError(f"{os.fspath(p)}: patch {name!r} of {field!r} has values on some processors only")
+        bvals[name] = v
+    if np.isnan(values).any():
+        raise ValueError(f"{os.fspath(p)}: the processors' {field!r} do not cover every cell")
+    return mesh, values, BoundaryValues(bvals)
