@@ -181,7 +181,7 @@ def test_cli_farm_run(files, capsys):
                       "--out", str(out_dir)], capsys)
     assert code == 0, out.err
     for name in ("roses.png", "map.png", "directions.csv", "yaw_gradient.csv", "sectors.csv",
-                 "probes.csv", "table.npz"):
+                 "probes.csv", "lidarProbes", "lidarProbes_zcfd.py", "table.npz"):
         assert (out_dir / name).is_file(), name
     import csv
     with open(out_dir / "directions.csv") as fh:
@@ -191,8 +191,14 @@ def test_cli_farm_run(files, capsys):
     assert np.all(np.isfinite(ratio)) and ratio.max() > 1.001  # waked from the west
     d = np.array([float(r["direction_deg"]) for r in rows])
     assert ratio[d == 90.0][0] == pytest.approx(1.0, abs=1e-4)  # free from the east
-    probes = (out_dir / "probes.csv").read_text()
-    assert "T001@ref1D" in probes and "lidar@90m@beam4" in probes
+    locs = lj.io.read_probe_csv(out_dir / "probes.csv")
+    names = list(locs.names)
+    assert "T001_ref1D" in names and "lidar_h90_beam4_q0" in names
+    hub = np.asarray(locs.points)[names.index("T001_hub")]
+    ref = np.asarray(locs.points)[names.index("T001_ref1D")]
+    assert np.linalg.norm(hub - ref) == pytest.approx(126.0)  # 1 D upstream
+    assert "T001_ref1D" in (out_dir / "lidarProbes").read_text()
+    assert "'name': 'lidar_h90_beam4_q0'" in (out_dir / "lidarProbes_zcfd.py").read_text()
     with open(out_dir / "yaw_gradient.csv") as fh:
         grad = list(csv.DictReader(line for line in fh if not line.startswith("#")))
     assert len(grad) == 4 and np.all(np.isfinite([float(g["T001"]) for g in grad]))

@@ -12,8 +12,11 @@ every direction, and writes to ``--out``:
 - ``yaw_gradient.csv``: d(lidar speed at the first height)/d(yaw) of every turbine, m/s per
   degree, per direction (0 for turbines whose wake misses the beams);
 - ``sectors.csv``: each turbine's bearing, distance and excluded width; the merged sectors;
-- ``probes.csv``: probe points (CFD metres): hub centres, seed 004's reference points (1 D
-  upstream at hub height) and the lidar's beam points, at ``--map-direction``;
+- ``probes.csv``, ``lidarProbes`` (OpenFOAM ``probes`` dictionary), ``lidarProbes_zcfd.py``
+  (zCFD ``turb_probe``, seed 004): the lidar's sample points at ``--map-direction`` (named
+  ``lidar_h<height>_beam<b>_q<node>``, as `lidarjax probes` writes them) plus each turbine's
+  hub centre (``<name>_hub``) and seed 004's reference point 1 D upstream at hub height
+  (``<name>_ref1D``);
 - ``table.npz``: the response table (for ``lidarjax correct``).
 """
 
@@ -129,7 +132,8 @@ def run(args) -> int:
     from ..batch import simulate_sectors
     from ..forward import simulate
     from ..io._common import atomic_write_text
-    from ..io.layout import read_farm, write_probe_points
+    from ..io.layout import read_farm
+    from ..io.probes import write_openfoam_probes, write_probe_csv, write_zcfd_probes
     from ..io.tables import save_table
     from ..mount import Mount
     from ..plots import plot_farm_map, plot_roses
@@ -275,15 +279,13 @@ def run(args) -> int:
 
     hub = np.asarray(f_map.hub_points(), np.float64) + origin
     ref = np.asarray(f_map.reference_points(), np.float64) + origin
-    pnames = [f"{n}@hub" for n in names] + [f"{n}@ref1D" for n in names]
-    ppts = [hub, ref]
-    for j, h in enumerate(heights):
-        pnames += [f"lidar@{h:g}m@beam{b}" for b in range(pts_abs.shape[1])]
-        ppts.append(pts_abs[j])
-    write_probe_points(out / "probes.csv", pnames, np.concatenate(ppts),
-                       header=f"probe points at direction {map_dir:g} deg, CFD metres: hub "
-                              f"centres, reference points 1 D upstream at hub height (seed "
-                              f"004), lidar beam focus points")
+    locs = farm_probe_locations(names, hub, ref, lay.hub_height, scan, m_map, heights, probe)
+    meta = {"direction_deg": map_dir, "rows": "lidar beam points (quadrature nodes with "
+            "--probe pulsed/cw), then turbine hub centres and seed 004 reference points 1 D "
+            "upstream at hub height (beam/node -3)"}
+    write_probe_csv(out / "probes.csv", locs, metadata=meta)
+    write_openfoam_probes(out / "lidarProbes", locs, metadata=meta)
+    write_zcfd_probes(out / "lidarProbes_zcfd.py", locs, metadata=meta)
     if dirs.size >= 3:
         table = ResponseTable.from_simulations(sims, mount=None)
         save_table(out / "table.npz", table, {"scan": scan_name, "layouts": list(args.layouts),
@@ -294,3 +296,25 @@ def run(args) -> int:
           f"{kind}; largest correction {np.nanmax(np.abs(ratio - 1)):.3f} at {map_dir:g} deg, "
           f"where {names[top]}'s yaw moves the reading most -> {out}")
     return 0
+
+
+def farm_probe_locations(names, hub, ref, hub_height, scan, mount, heights, probe):
+    """The lidar's probe points (`lidarjax.probe_locations`, label ``lidar``) followed by each
+    turbine's hub centre and reference point (absolute CFD metres) as one `ProbeLocations`;
+    turbine rows have ``beam = node = -3``, NaN beta and weight, height = hub height."""
+    import numpy as np
+
+    from ..cfd_probes import ProbeLocations, probe_locations
+
+    lidar = probe_locations(scan, mount, np.asarray(heights, np.float64), probe,
+                            labels=["lidar"])
+    n = 2 * len(names)
+    turbines = ProbeLocations(
+        names=tuple(f"{x}_hub" for x in names) + tuple(f"{x}_ref1D" for x in names),
+        mount=("turbines",) * n, points=np.concatenate([hub, ref]),
+        beta=np.full(n, np.nan), height=np.tile(np.asarray(hub_height, np.float64), 2),
+        beam=np.full(n, -3), node=np.full(n, -3), weight=np.full(n, np.nan))
+    both = {f: (getattr(lidar, f) + getattr(turbines, f)) if f in ("names", "mount")
+            else np.concatenate([getattr(lidar, f), getattr(turbines, f)])
+            for f in ("names", "mount", "points", "beta", "height", "beam", "node", "weight")}
+    return ProbeLocations(**both)

@@ -33,7 +33,6 @@ from .layout import FarmLayout as FarmLayout
 from .layout import read_farm as read_farm
 from .layout import read_layout as read_layout
 from .layout import read_turbine_type as read_turbine_type
-from .layout import write_probe_points as write_probe_points
 from .motion import read_motion_csv as read_motion_csv
 from .openfoam import OpenFOAMField as OpenFOAMField
 from .openfoam import is_openfoam_case as is_openfoam_case

@@ -16,9 +16,10 @@
 Each layout file is paired with one turbine type (`read_farm`): the zCFD utility's
 ``turbine_files=[[xy_file, trbx_file], ...]``.
 
-**Probe points** (seed 004's generated monitor probes): `write_probe_points` writes a CSV of
-named points ``name,x,y,z`` (CFD metres), e.g. the reference points one rotor diameter
-upstream of each disc at hub height.
+**Probe points** (seed 004's generated monitor probes): `lidarjax farm` writes each turbine's
+hub centre and reference point (one rotor diameter upstream at hub height,
+`WindFarm.reference_points`) with the lidar's sample points through `lidarjax.io.probes`
+(OpenFOAM ``probes`` dictionary, zCFD ``turb_probe`` file, CSV).
 """
 
 from __future__ import annotations
@@ -31,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import PathLike, atomic_write_text, file_error, normalise_key, require_file
+from ._common import PathLike, file_error, normalise_key, require_file
 
 __all__ = ["Layout", "TurbineType", "FarmLayout", "read_layout", "read_turbine_type",
-           "read_farm", "write_probe_points", "check_spacing"]
+           "read_farm", "check_spacing"]
 
 _SPEED_KEYS = ("speed", "windspeed", "speedms", "ws", "u")
 _CT_KEYS = ("ct", "thrustcoefficient", "thrust")
@@ -253,16 +254,3 @@ def read_farm(layouts, types) -> FarmLayout:
     hub = np.array([tt[k].hub_height for k in tix_a])
     check_spacing(names, e, n, diam)
     return FarmLayout(tuple(names), np.array(e), np.array(n), diam, hub, tt, tix_a)
-
-
-def write_probe_points(path: PathLike, names, points, *, header: str | None = None) -> Path:
-    """Write named probe points as CSV ``name,x,y,z`` (CFD metres, full float64 precision),
-    atomically. `header` lines are written first as ``#`` comments."""
-    pts = np.asarray(points, np.float64)
-    names = list(names)
-    if pts.shape != (len(names), 3):
-        raise ValueError(f"write_probe_points: need one (x, y, z) per name, got {pts.shape}")
-    lines = [f"# {h}" for h in (header.splitlines() if header else [])]
-    lines.append("name,x,y,z")
-    lines += [f"{nm},{p[0]!r},{p[1]!r},{p[2]!r}" for nm, p in zip(names, pts.tolist(), strict=True)]
-    return atomic_write_text(path, "\n".join(lines) + "\n")
