@@ -202,3 +202,27 @@ def test_cli_farm_run(files, capsys):
     with open(out_dir / "yaw_gradient.csv") as fh:
         grad = list(csv.DictReader(line for line in fh if not line.startswith("#")))
     assert len(grad) == 4 and np.all(np.isfinite([float(g["T001"]) for g in grad]))
+
+
+def test_cli_farm_nacelle_lidar_reads_the_free_stream_ahead_of_the_front_turbine(files, capsys):
+    """A forward-looking 2-beam nacelle lidar on the westernmost turbine, wind from the west:
+    its beams look into undisturbed air (the wake models have no induction zone), so it reads
+    the free stream and no yaw misalignment; with the wind from T002 (bearing 127 degrees,
+    471 m away) it looks into T002's wake."""
+    out_dir = files / "nac"
+    code, out = _run(["farm", str(files / "a.txt"), "--turbine", str(files / "t.csv"),
+                      "--nacelle", "T001", "--speed", "9", "--directions", "127:271:143",
+                      "--probe", "point", "--out", str(out_dir)], capsys)
+    assert code == 0, out.err
+    for name in ("directions.csv", "yaw_gradient.csv", "probes.csv", "lidarProbes", "map.png"):
+        assert (out_dir / name).is_file(), name
+    import csv
+    with open(out_dir / "directions.csv") as fh:
+        rows = {float(r["direction_deg"]): r for r in
+                csv.DictReader(line for line in fh if not line.startswith("#"))}
+    h = "315m"  # 2.5 D ahead along the axis
+    west = rows[270.0]
+    assert float(west[f"lidar_speed_{h}"]) == pytest.approx(9.0, abs=1e-9)
+    assert float(west[f"speed_ratio_{h}"]) == pytest.approx(1.0, abs=1e-9)
+    assert float(west[f"yaw_misalignment_{h}"]) == pytest.approx(0.0, abs=1e-6)
+    assert float(rows[127.0][f"lidar_speed_{h}"]) < 9.0 - 0.1  # in T002's wake
