@@ -167,15 +167,44 @@ def simulate_sectors(
     **Returns:** a `Simulation` whose every array has a leading sector axis ``s``
     (e.g. ``los`` is ``(s, h, b)``), equal to stacking `simulate` for each sector.
     """
+    field, mount, u_refs, heights, probe, (field_axis, mount_axis, uref_axis), given = \
+        sector_arguments("simulate_sectors", fields, scan, mounts, heights, u_refs, probe)
+    if not given:
+        raise ValueError(
+            "simulate_sectors: nothing to batch; give a list or stack of fields, of mounts or "
+            "of u_refs (or call lidarjax.simulate)."
+        )
+    return _sectors_jit(
+        field, scan, mount, heights, u_refs, probe, ratio_tol, point_reference=point_reference,
+        field_axis=field_axis, mount_axis=mount_axis, uref_axis=uref_axis,
+    )
+
+
+def sector_arguments(fname, fields, scan, mounts, heights, u_refs, probe, *,
+                     names=("mounts", "u_refs")):
+    """Normalise the sector arguments of `simulate_sectors` (and of `lidarjax.sensitivity`):
+    stack field and mount lists, find which of fields, mounts and free streams carry the
+    sector axis, check their counts agree, and validate one sector as `simulate` would,
+    before compiling.
+
+    **Returns:** ``(field, mount, u_refs, heights, probe, (field_axis, mount_axis,
+    uref_axis), sizes)`` with each axis 0 or None and `sizes` the sector count of each
+    batched argument (empty when nothing is batched). `names`: the caller's names of the
+    mount and free-stream arguments, for the messages.
+    """
     field = fields if isinstance(fields, AbstractField) else stack_fields(fields)
     field_axis = 0 if _is_stacked(field) else None
     if isinstance(mounts, Mount):
         mount = mounts
         mount_axis = 0 if mounts.location.ndim == 2 else None
-    else:
+    elif isinstance(mounts, Sequence) and not isinstance(mounts, str):
         mount = stack_mounts(mounts)
         mount_axis = 0
+    else:
+        raise ValueError(f"{fname}: `{names[0]}` must be a lidarjax.Mount or a list of Mounts.")
     u_refs = None if u_refs is None else jnp.asarray(u_refs)
+    if u_refs is not None and (u_refs.shape[-1:] != (3,) or u_refs.ndim > 2):
+        raise ValueError(f"{fname}: {names[1]} must be (s, 3) or (3,), got {u_refs.shape}.")
     uref_axis = 0 if u_refs is not None and u_refs.ndim == 2 else None
     sizes = {
         "fields": _n_stacked(field) if field_axis == 0 else None,
@@ -183,23 +212,14 @@ def simulate_sectors(
         "u_refs": u_refs.shape[0] if uref_axis == 0 else None,
     }
     given = {k: v for k, v in sizes.items() if v is not None}
-    if not given:
+    if len(set(given.values())) > 1:
         raise ValueError(
-            "simulate_sectors: nothing to batch; give a list or stack of fields, of mounts or "
-            "of u_refs (or call lidarjax.simulate)."
-        )
-    n = max(given.values())
-    if any(v != n for v in given.values()):
-        raise ValueError(
-            f"simulate_sectors: sector counts differ ({given}); give one of each per sector "
+            f"{fname}: sector counts differ ({given}); give one of each per sector "
             f"or a single shared one. E.g. {sizes['mounts']} mounts for "
             f"{sizes['fields']} sectors."
         )
-    if u_refs is not None and u_refs.shape[-1:] != (3,):
-        raise ValueError(f"simulate_sectors: u_refs must be (s, 3) or (3,), got {u_refs.shape}.")
     if probe is None:
         probe = PointProbe()
-    # validate one sector as `simulate` would, before compiling
     first_field = unstack_field(field, 0) if field_axis == 0 else field
     first_mount = mount if mount_axis is None else jax.tree_util.tree_map(lambda x: x[0], mount)
     first_uref = None if u_refs is None else (u_refs if uref_axis is None else u_refs[0])
@@ -207,8 +227,4 @@ def simulate_sectors(
     heights = jnp.atleast_1d(jnp.asarray(heights))
     if not jnp.issubdtype(heights.dtype, jnp.floating):
         heights = heights.astype(first_field.dtype)
-    return _sectors_jit(
-        field, scan, mount, heights, u_refs, probe, ratio_tol, point_reference=point_reference,
-        field_axis=field_axis, mount_axis=mount_axis, uref_axis=uref_axis,
-    )
-
+    return field, mount, u_refs, heights, probe, (field_axis, mount_axis, uref_axis), given

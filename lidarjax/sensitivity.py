@@ -67,12 +67,12 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .angles import horizontal_speed, wind_direction, wrap180
-from .batch import _is_stacked, _n_stacked, stack_fields, stack_mounts, unstack_field
+from .batch import _is_stacked, _n_stacked, sector_arguments, unstack_field
 from .corrections import DEFAULT_RATIO_TOL
 from .field import AbstractField, GridField
-from .forward import _simulate, _validate
+from .forward import _simulate
 from .mount import Mount
-from .probe import AbstractProbe, PointProbe
+from .probe import AbstractProbe
 from .scan import Scan
 from .scenes import heading
 
@@ -318,38 +318,12 @@ def _jacobian_batch(field, scan, mount, heights, u_ref, probe, cfg, axes):
 
 
 def _prepare(fname, field, scan, mount, heights, u_ref, probe, names, outputs, inverse=False):
-    fields = field
-    field = fields if isinstance(fields, AbstractField) else stack_fields(fields)
-    field_axis = 0 if _is_stacked(field) else None
-    if isinstance(mount, Mount):
-        mount_axis = 0 if mount.location.ndim == 2 else None
-    elif isinstance(mount, Sequence) and not isinstance(mount, str):
-        mount = stack_mounts(mount)
-        mount_axis = 0
-    else:
-        raise ValueError(f"{fname}: `mount` must be a lidarjax.Mount or a list of Mounts.")
-    if u_ref is not None:
-        u_ref = jnp.asarray(u_ref)
-        if u_ref.shape[-1:] != (3,) or u_ref.ndim > 2:
-            raise ValueError(f"{fname}: `u_ref` must be (3,) or (s, 3) m/s, got {u_ref.shape}.")
-    uref_axis = 0 if u_ref is not None and u_ref.ndim == 2 else None
-    sizes = {"fields": _n_stacked(field) if field_axis == 0 else None,
-             "mounts": mount.location.shape[0] if mount_axis == 0 else None,
-             "u_ref": u_ref.shape[0] if uref_axis == 0 else None}
-    given = {k: v for k, v in sizes.items() if v is not None}
-    if given and len(set(given.values())) != 1:
-        raise ValueError(f"{fname}: sector counts differ ({given}); give one of each per sector "
-                         f"or a single shared one.")
+    field, mount, u_ref, heights, probe, axes, given = sector_arguments(
+        fname, field, scan, mount, heights, u_ref, probe, names=("mount", "u_ref"))
+    field_axis, mount_axis, uref_axis = axes
     n_sectors = next(iter(given.values())) if given else None
-    if probe is None:
-        probe = PointProbe()
     first_field = unstack_field(field, 0) if field_axis == 0 else field
     first_mount = mount if mount_axis is None else jax.tree_util.tree_map(lambda x: x[0], mount)
-    first_uref = None if u_ref is None else (u_ref if uref_axis is None else u_ref[0])
-    _validate(first_field, scan, first_mount, heights, first_uref, probe)
-    heights = jnp.atleast_1d(jnp.asarray(heights))
-    if not jnp.issubdtype(heights.dtype, jnp.floating):
-        heights = heights.astype(first_field.dtype)
     heights = heights.astype(first_field.dtype)
 
     # names and outputs
