@@ -31,7 +31,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._precision import default_float, is_concrete, split
 
-__all__ = ["AbstractField", "GridField"]
+__all__ = ["AbstractField", "GridField", "TimeSampler", "SteadySampler", "DirectSampler"]
 
 
 class AbstractField(eqx.Module):
@@ -105,6 +105,75 @@ class AbstractField(eqx.Module):
         ok = jnp.all(jnp.isfinite(v), axis=-1)
         v = jnp.where(ok[..., None], v, 0.0)
         return jnp.where(ok, jnp.sum(v * directions, axis=-1), jnp.nan)
+
+    def time_sampler(
+        self,
+        points: Float[Array, "... 3"],
+        directions: Float[Array, "... 3"] | None = None,
+        *,
+        n_times: int = 1,
+    ) -> TimeSampler:
+        """This field prepared for sampling the same local points (metres, relative to
+        `origin`) at many times: ``sampler(time)`` equals ``sample_local_at(points, time)``
+        (velocity, m/s, CFD frame, shape ``broadcast(time.shape, points.shape[:-1]) + (3,)``)
+        or, with unit `directions` (broadcastable to `points`), ``los_local_at(points,
+        directions, time)`` (m/s along the directions, that shape without the last axis).
+
+        `n_times` (static) is how many times each point will be sampled by the compiled call;
+        a field may use it to decide whether work per point pays (frozen turbulence builds
+        one line along the wind per point when it does). A steady field (one that does not
+        override `sample_local_at`) samples the points once and returns them for any time.
+        Differentiable in the points, directions, times and every field value."""
+        del n_times
+        points = jnp.asarray(points)
+        steady = (type(self).sample_local_at is AbstractField.sample_local_at
+                  and type(self).los_local_at is AbstractField.los_local_at)
+        if not steady:
+            return DirectSampler(self, points, directions)
+        if directions is None:
+            return SteadySampler(self.sample_local(points), vector=True)
+        directions = jnp.broadcast_to(jnp.asarray(directions, points.dtype), points.shape)
+        return SteadySampler(self.los_local(points, directions), vector=False)
+
+
+class TimeSampler(eqx.Module):
+    """A field prepared for sampling fixed points at many times (`AbstractField.time_sampler`):
+    call it with times in seconds (any shape broadcastable against the points' leading
+    shape)."""
+
+    def __call__(self, time: Float[ArrayLike, ...]) -> Float[Array, ...]:
+        raise NotImplementedError
+
+
+class SteadySampler(TimeSampler):
+    """The values of a steady field at the points, the same at every time."""
+
+    values: Float[Array, ...]
+    vector: bool = eqx.field(static=True)
+
+    def __call__(self, time):
+        lead = self.values.shape[:-1] if self.vector else self.values.shape
+        shape = jnp.broadcast_shapes(jnp.shape(time), lead)
+        return jnp.broadcast_to(self.values, shape + self.values.shape[len(lead):])
+
+
+class DirectSampler(TimeSampler):
+    """Samples the field at the points at each call (no preparation)."""
+
+    field: AbstractField
+    points: Float[Array, "... 3"]
+    directions: Float[Array, "... 3"] | None
+
+    def __call__(self, time):
+        # the field's contract: times broadcastable to points.shape[:-1]
+        time = jnp.asarray(time)
+        shape = jnp.broadcast_shapes(time.shape, self.points.shape[:-1])
+        points = jnp.broadcast_to(self.points, shape + (3,))
+        time = jnp.broadcast_to(time, shape)
+        if self.directions is None:
+            return self.field.sample_local_at(points, time)
+        directions = jnp.broadcast_to(self.directions, shape + (3,))
+        return self.field.los_local_at(points, directions, time)
 
 
 def _check_axis(name: str, values) -> np.ndarray:

@@ -159,6 +159,29 @@ def _window_index(order: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(cyc), np.asarray(last)
 
 
+def _sliding_windows(los, t_los, order):
+    """The windows of `_window_index` by static slices (no gather): LOS ``(n, h, b)`` of
+    each window and its time ``(n, h)`` (that of the beam just taken). After the first
+    complete cycle, the window closed by the ``r``-th LOS of cycle ``c`` holds beam ``j``
+    from cycle ``c - 1`` if ``j`` comes later in the order than that LOS, else from ``c``."""
+    m, _, b = los.shape
+    order = np.asarray(order)
+    rank = np.empty(b, int)
+    rank[order] = np.arange(b)
+    first_w, first_t = los[:1], t_los[:1, :, order[-1]]
+    if m == 1:
+        return first_w, first_t
+    per_r = []
+    for r in range(b):
+        d = (rank > r).astype(int)
+        per_r.append(jnp.stack([los[1 - d[j]:m - d[j], :, j] for j in range(b)], axis=-1))
+    wins = jnp.stack(per_r, axis=1).reshape((m - 1) * b, *los.shape[1:])  # (c, r) order
+    times = jnp.stack([t_los[1:, :, order[r]] for r in range(b)], axis=1)
+    times = times.reshape((m - 1) * b, t_los.shape[1])
+    return (jnp.concatenate([first_w, wins], axis=0),
+            jnp.concatenate([first_t, times], axis=0))
+
+
 def simulate_series(
     field: AbstractField,
     scan: Scan,
@@ -251,7 +274,10 @@ def _to_north(scan: Scan, mount: Mount, v_lidar):
 
 
 def _series(field, scan, mount, heights, start, schedule, probe, motion, point_dt, *,
-            n_cycles, n_points, order, duration):
+            n_cycles, n_points, order, duration, repeat=1):
+    """The series; `repeat` (static) is how many records one compiled call simulates with
+    the same field (a vmapped chunk): it decides whether preparing the field's sample
+    points pays (`AbstractField.time_sampler`)."""
     dtype = field.dtype
     cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
     scan = jax.tree_util.tree_map(cast, scan)
@@ -283,22 +309,24 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
         n_cfd, per_height = _geometry(scan, mount_d)
         ranges = heights[:, None] * per_height[None, :]
 
-        def cycle(t_hb):
-            frozen = _AtTime(field.origin, field.origin_lo, field, t_hb)
-            return _beam_los(frozen, origin_local, n_cfd, ranges, probe)[0]
+        # The sample points are the same at every time: the field is prepared for them once
+        # (`AbstractField.time_sampler`: frozen turbulence builds one line along the wind
+        # per point, a steady field samples them once) and sampled at every LOS time.
+        n_times = m * repeat
 
-        los = jax.vmap(cycle)(t_los)
+        def los_at(pts, dirs):
+            t = t_los[..., None] if pts.ndim == 4 else t_los  # (m, h, b[, 1])
+            return field.time_sampler(pts, dirs, n_times=n_times)(t)
+
+        los = _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)[0]
     else:
         los = jax.vmap(one)(t_los.reshape(-1), beam.reshape(-1), hgt.reshape(-1)).reshape(m, h, b)
 
     # reconstructions, as the instrument builds them
     if schedule.update == "each_los":
-        cyc, last = _window_index(np.asarray(order), m)
-        cols = jnp.arange(b)
-        los_w = los[jnp.asarray(cyc), :, cols[None, :]]  # (n, b, h)
-        los_w = jnp.swapaxes(los_w, 1, 2)  # (n, h, b)
-        last_cycle = cyc[np.arange(cyc.shape[0]), last]
-        t_rec = t_los[jnp.asarray(last_cycle), :, jnp.asarray(last)]  # (n, h)
+        # every LOS enters b windows: computed once (XLA would otherwise fuse the sampling
+        # into the windows and repeat it b times)
+        los_w, t_rec = _sliding_windows(jax.lax.optimization_barrier(los), t_los, order)
     else:
         rot = schedule.rotations_per_height if schedule.heights_sequential else 1
         los_w = jnp.mean(los.reshape(m // rot, rot, h, b), axis=1)
@@ -317,7 +345,7 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
     t_pt = start + jnp.arange(n_points, dtype=dtype) * point_dt
     zhat = jnp.array([0.0, 0.0, 1.0], dtype)
     pts = origin_local + heights[:, None] * zhat  # (h, 3)
-    v_pt = jax.vmap(lambda t: field.sample_local_at(pts, t))(t_pt)  # (p, h, 3)
+    v_pt = field.time_sampler(pts, n_times=n_points * repeat)(t_pt[:, None])  # (p, h, 3)
     v_pt = rotate(cfd_to_north_rotation(mount_d), v_pt)
     return Series(heights=heights, los_time=t_los, los=los, time=t_rec, velocity=velocity,
                   point_time=t_pt, point_velocity=v_pt, start=start,
@@ -429,9 +457,18 @@ def _statistics(series: Series, starts, record_length) -> SeriesStatistics:
         vmean = jnp.sum(vps, axis=0) / jnp.where(npk > 0, npk, 1)[:, None]
         sonic_speed = jnp.where(npk > 0, horizontal_speed(vmean), jnp.nan)
         sonic_dir = jnp.where(npk > 0, wind_direction(vmean), jnp.nan)
+        # std of the component along the mean direction e: e^T C e with C the (u, v)
+        # covariance (the projection on e, written without projecting every sample onto a
+        # mean that must be reduced first: one pass over the samples)
         unit = vmean[:, :2] / jnp.where(sonic_speed > 0, sonic_speed, 1)[:, None]
-        along = jnp.sum(vps[..., :2] * unit, axis=-1)
-        _, sonic_std, _ = _masked_stats(along, pok, 0)
+        du = jnp.where(pok, vps[..., 0] - vmean[:, 0], 0)
+        dv = jnp.where(pok, vps[..., 1] - vmean[:, 1], 0)
+        nn = jnp.where(npk > 0, npk, 1)
+        cuu, cvv, cuv = (jnp.sum(du * du, 0) / nn, jnp.sum(dv * dv, 0) / nn,
+                         jnp.sum(du * dv, 0) / nn)
+        var_along = unit[:, 0] ** 2 * cuu + 2 * unit[:, 0] * unit[:, 1] * cuv + unit[:, 1] ** 2 * cvv
+        sonic_std = jnp.where(npk > 0, jnp.sqrt(jnp.where(var_along > 0, var_along, 0))
+                              * jnp.where(var_along > 0, 1, 0), jnp.nan)
         sw, sw_std, _ = _masked_stats(vps[..., 2], pok, 0)
         return SeriesStatistics(
             speed=speed, direction=direction, speed_std=speed_std, speed_min=smin,
@@ -505,11 +542,12 @@ def simulate_statistics(
     _, duration, n_cycles = _check_span((0.0, record_length), schedule, heights.shape[0])
     n_points = max(int(np.floor(duration / point_dt + 1e-9)), 1)
     order = tuple(int(i) for i in schedule.order())
-    fn = _record_stats_fn(n_cycles, n_points, order, float(record_length), ensemble)
     devices = jax.devices()
     n_dev = len(devices) if shard else 1
     chunk = max(int(chunk), 1)
     chunk = -(-chunk // n_dev) * n_dev
+    fn = _record_stats_fn(n_cycles, n_points, order, float(record_length), ensemble,
+                          max(chunk // n_dev, 1))
     sharding = None
     if n_dev > 1:
         mesh = jax.sharding.Mesh(np.asarray(devices), ("records",))
@@ -536,16 +574,17 @@ def simulate_statistics(
 _STATS_CACHE: dict = {}
 
 
-def _record_stats_fn(n_cycles, n_points, order, record_length, ensemble):
-    """The compiled per-chunk function (one per static configuration)."""
-    key = (n_cycles, n_points, order, record_length, ensemble)
+def _record_stats_fn(n_cycles, n_points, order, record_length, ensemble, repeat):
+    """The compiled per-chunk function (one per static configuration); `repeat`: records per
+    device in a chunk, all sampling the same prepared field points."""
+    key = (n_cycles, n_points, order, record_length, ensemble, repeat)
     if key in _STATS_CACHE:
         return _STATS_CACHE[key]
 
     def one_record(field, scan, mount, heights, start, schedule, probe, motion, point_dt):
         series = _series(field, scan, mount, heights, start, schedule, probe, motion, point_dt,
                          n_cycles=n_cycles, n_points=n_points, order=order,
-                         duration=record_length)
+                         duration=record_length, repeat=repeat)
         st = _statistics(series, start[None], jnp.asarray(record_length, heights.dtype))
         return jax.tree_util.tree_map(lambda a: a[0], st)
 

@@ -407,34 +407,23 @@ def lidar_variance_ratio(scan, probe, height, length_scale, gamma, **kwargs) -> 
 
 def synthesize_box(shape, spacing, alphaepsilon, length_scale, gamma, *, seed=0, dtype=None):
     """A periodic Gaussian Mann box whose spectrum is *exactly* ``Phi(k) dk`` on the box's
-    wavenumbers (the spectral model of `lidar_variance`), by FFT synthesis:
-    ``u(x) = Re sum_k sqrt(dk) Phi(k)^(1/2) xi_k exp(i k . x)`` with ``xi_k`` independent
-    complex standard normal vectors (real and imaginary parts of unit variance). Periodic in
-    all three directions; box frame of `lidarjax.scenes.turbulence`. Unlike hipersim it does
-    not apply Mann's (1998) low-wavenumber cell averaging, so its expected covariances are
-    those of `box_variance` exactly.
+    wavenumbers (the spectral model of `lidar_variance`), as a `lidarjax.scenes.TurbulenceBox`
+    (``periodic=(True, True)``, box frame of `lidarjax.scenes.turbulence`).
 
-    Returns a `lidarjax.scenes.TurbulenceBox` (``periodic=(True, True)``).
+    The one generator of such boxes is `lidarjax.turbulence_box.fft_mann_box` (FFT synthesis
+    ``u(x) = Re sum_k sqrt(dk) C(k) xi_k exp(i k . x)`` with Mann's closed-form ``C C^H =
+    Phi`` and independent complex standard normal ``xi_k``); this wraps its array. Unlike
+    hipersim it does not apply Mann's (1998) low-wavenumber cell averaging, so its expected
+    covariances are those of `box_variance` exactly.
     """
     import jax.numpy as jnp
 
     from ._precision import default_float
     from .scenes.turbulence import TurbulenceBox
+    from .turbulence_box import fft_mann_box
 
-    shape = tuple(int(n) for n in shape)
-    (k1, k2, k3), dk = box_wavenumbers(shape, spacing)
-    rng = np.random.default_rng(seed)
-    coef = np.empty(shape + (3,), dtype=np.complex128)
-    K2, K3 = np.meshgrid(k2, k3, indexing="ij")
-    for i, a in enumerate(k1):
-        kk = np.stack(np.broadcast_arrays(a, K2, K3), -1)
-        phi = mann_tensor(kk, alphaepsilon, length_scale, gamma) * dk
-        val, vec = np.linalg.eigh(phi)
-        root = (vec * np.sqrt(np.clip(val, 0, None))[..., None, :]) @ np.swapaxes(vec, -1, -2)
-        xi = rng.standard_normal(K2.shape + (3,)) + 1j * rng.standard_normal(K2.shape + (3,))
-        coef[i] = np.einsum("...ij,...j->...i", root, xi)
-    n_total = shape[0] * shape[1] * shape[2]
-    u = np.real(np.fft.ifftn(coef, axes=(0, 1, 2))) * n_total
+    u = fft_mann_box(shape, spacing, length_scale=length_scale, gamma=gamma,
+                     alphaepsilon=alphaepsilon, seed=seed)
     dtype = default_float() if dtype is None else dtype
     return TurbulenceBox(jnp.asarray(u, dtype=dtype), jnp.asarray(spacing, dtype=dtype),
                          periodic=(True, True))

@@ -1,13 +1,16 @@
-"""A small, dependency-free FFT generator of Mann (1994, 1998) turbulence boxes.
+"""The FFT generator of exact-spectrum Mann (1994, 1998) turbulence boxes (numpy and scipy
+only).
 
 `lidarjax.scenes.turbulence.mann_box` generates boxes with hipersim (the optional extra
-``turbulence``), the reference implementation, and `lidarjax.spectral.synthesize_box` draws
-the exact spectrum through an eigen-decomposition of ``Phi(k)`` at every wavenumber. This
-module needs only numpy and scipy too, and uses Mann's closed-form square root ``C(k)``
-instead (about 10x faster: the demo and the command line use it); its ``C C^H`` equals
-`lidarjax.spectral.mann_tensor` to rounding and its boxes have the covariance of
-`lidarjax.spectral.box_variance` (both tested). One periodic box (no lateral/vertical
-doubling, periodic in all three directions, as FFT boxes are).
+``turbulence``), the reference implementation, which applies Mann's low-wavenumber cell
+averaging. This module draws the box's discrete spectrum exactly, with Mann's closed-form
+square root ``C(k)`` of the spectral tensor (its ``C C^H`` equals
+`lidarjax.spectral.mann_tensor` to rounding, and its boxes have the covariance of
+`lidarjax.spectral.box_variance`; both tested): the box the spectral model of
+`lidarjax.spectral` describes. It is the library's one such generator: the demo, the command
+line and `lidarjax.spectral.synthesize_box` (the same box as a `TurbulenceBox`) use it. One
+periodic box (no lateral/vertical doubling, periodic in all three directions, as FFT boxes
+are).
 
 The spectral tensor is Mann's uniform-shear model: the von Karman energy spectrum
 ``E(k) = alpha eps^(2/3) L^(5/3) (kL)^4 / (1 + (kL)^2)^(17/6)`` (isotropic for

@@ -185,3 +185,92 @@ def test_bad_input():
         FrozenTurbulence(box, box, 10.0, 270.0)
     with pytest.raises(ValueError, match="speed"):
         FrozenTurbulence(scenes.uniform(), box, np.nan, 270.0)
+
+
+# ----------------------------------------------------------------------------------------
+# fixed points sampled at many times (AbstractField.time_sampler): frozen turbulence builds
+# one line along the wind per point; it must equal direct sampling
+# ----------------------------------------------------------------------------------------
+def _sampler_values(f, pts, dirs, ts, n_times):
+    return eqx.filter_jit(lambda f, p, d, t: f.time_sampler(p, d, n_times=n_times)(t))(
+        f, pts, dirs, ts)
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+def test_time_sampler_lines_equal_direct_sampling(periodic):
+    from lidarjax.scenes.turbulence import _LineSampler
+
+    box, k = mode_box(periodic=periodic)
+    rng = np.random.default_rng(11)
+    grid = lidarjax.GridField(np.linspace(-400, 400, 9), np.linspace(-200, 200, 5),
+                              np.linspace(0, 60, 5), 8.0 + rng.normal(size=(9, 5, 5, 3)))
+    f = FrozenTurbulence(grid, box, 8.7, 241.0, anchor=(3.0, -2.0, 1.0), shift=17.0)
+    # points (4, 5) including some outside a non-periodic box (laterally and above it)
+    pts = jnp.asarray(rng.uniform([-150, -60, 2], [150, 60, 45], size=(4, 5, 3)))
+    dirs = jnp.asarray(rng.normal(size=(5, 3)))
+    dirs = dirs / jnp.linalg.norm(dirs, axis=-1, keepdims=True)
+    ts = jnp.asarray(rng.uniform(0, 900, size=(7, 1, 1)))
+    assert isinstance(f.time_sampler(pts, dirs, n_times=1000), _LineSampler)
+    assert not isinstance(f.time_sampler(pts, dirs, n_times=1), _LineSampler)
+    for d in (dirs, None):
+        lines = _sampler_values(f, pts, d, ts, 1000)
+        direct = _sampler_values(f, pts, d, ts, 1)
+        ref = (sample_at(f, jnp.broadcast_to(pts, (7, 4, 5, 3)), jnp.broadcast_to(ts, (7, 4, 5)))
+               if d is None else f.los_local_at(jnp.broadcast_to(pts, (7, 4, 5, 3)), d,
+                                                jnp.broadcast_to(ts, (7, 4, 5))))
+        assert lines.shape == ref.shape == direct.shape
+        np.testing.assert_array_equal(np.isnan(lines), np.isnan(ref))
+        if not periodic:
+            assert np.isnan(ref).any() and np.isfinite(ref).any()
+        np.testing.assert_allclose(lines, ref, rtol=0, atol=1e-12, equal_nan=True)
+        np.testing.assert_allclose(direct, ref, rtol=0, atol=1e-12, equal_nan=True)
+
+
+def test_time_sampler_steady_field_and_budget():
+    from lidarjax.field import SteadySampler
+    from lidarjax.scenes import turbulence
+
+    mean = scenes.uniform(9.0, 250.0)
+    pts = jnp.asarray([[3.0, 4.0, 5.0], [-30.0, 10.0, 20.0]])
+    s = mean.time_sampler(pts, n_times=100)
+    assert isinstance(s, SteadySampler)
+    out = s(jnp.zeros((6, 1)))
+    assert out.shape == (6, 2, 3)
+    np.testing.assert_allclose(out[3], mean.sample_local(pts))
+    # too many numbers for the line budget: sampled directly, same values
+    box, _ = mode_box()
+    f = FrozenTurbulence(mean, box, 9.0, 250.0)
+    big = jnp.zeros((turbulence.LINE_BUDGET // box.shape[0] + 1, 3))
+    assert not isinstance(f.time_sampler(big, n_times=10**6), turbulence._LineSampler)
+
+
+def test_time_sampler_float32_long_advection_and_gradients():
+    """The lines keep the float32 accuracy of direct sampling over a day, and their
+    gradients (time, speed, direction, anchor, box values) match finite differences."""
+    u = float(np.float32(10.3))
+    rng = np.random.default_rng(2)
+    pts = rng.uniform([-100, -40, 2], [100, 40, 30], size=(16, 3)).astype(np.float32)
+    b64, _ = mode_box()
+    b32, _ = mode_box(dtype=jnp.float32)
+    f64 = FrozenTurbulence(scenes.uniform(0.0, 263.0), b64, u, 263.0)
+    f32 = FrozenTurbulence(scenes.uniform(0.0, 263.0, dtype=jnp.float32), b32, np.float32(u),
+                           np.float32(263.0))
+    ts = np.float32([600.37, 3600.37, 86400.37])[:, None]
+    a = np.asarray(_sampler_values(f32, jnp.asarray(pts), None, jnp.asarray(ts), 1000))
+    assert a.dtype == np.float32
+    b = np.asarray(_sampler_values(f64, jnp.asarray(pts, jnp.float64), None,
+                                   jnp.asarray(ts, jnp.float64), 1000))
+    np.testing.assert_allclose(a, b, atol=2e-5)
+
+    box, _ = mode_box(n=(16, 8, 8))
+    mean = scenes.uniform(10.0, 250.0)
+    p = jnp.asarray([[13.0, 4.0, 7.0], [-31.0, 10.0, 21.0]])
+    dirn = jnp.asarray([0.3, -0.2, 0.9])
+
+    def los(params):
+        t, sp, d, ax, scale = params
+        f = FrozenTurbulence(mean, box.scaled(scale), sp, d, anchor=jnp.stack([ax, 0.0, 0.0]))
+        return jnp.sum(f.time_sampler(p, dirn, n_times=64)(jnp.stack([t, t + 3.0])[:, None]))
+
+    assert_grad_matches_fd(jax.jit(los), jnp.asarray([123.4, 9.3, 251.0, 2.0, 1.3]), eps=1e-5,
+                           rtol=1e-5, atol=1e-7)

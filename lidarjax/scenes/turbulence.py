@@ -57,7 +57,8 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._precision import default_float, is_concrete
-from ..field import AbstractField
+from ..field import AbstractField, TimeSampler
+from ..frames import rotate
 from .analytic import heading
 
 __all__ = ["TurbulenceBox", "FrozenTurbulence", "frozen_turbulence", "mann_box"]
@@ -325,7 +326,7 @@ class FrozenTurbulence(AbstractField):
         time = time.astype(dtype)
         axes = self.axes()
         d = points - self.anchor
-        local = jnp.einsum("ij,...j->...i", axes, d)
+        local = rotate(axes, d)
         travelled = advected_distance(self.speed, time, self.box.length)
         shape = jnp.broadcast_shapes(local.shape[:-1], travelled.shape)
         xi = (local[..., 0] - self.shift) - travelled
@@ -334,7 +335,7 @@ class FrozenTurbulence(AbstractField):
             jnp.broadcast_to(local[..., 1], shape),
             jnp.broadcast_to(local[..., 2], shape),
         )
-        return jnp.einsum("...i,ij->...j", uvw, axes)
+        return rotate(axes.T, uvw)
 
     def sample_local_at(self, points, time):
         """Velocity (m/s, CFD frame) at field-local points (m) and times (s, broadcastable to
@@ -345,6 +346,108 @@ class FrozenTurbulence(AbstractField):
     def sample_local(self, points):
         """The field at ``t = 0``."""
         return self.sample_local_at(points, jnp.zeros((), self.dtype))
+
+    def time_sampler(self, points, directions=None, *, n_times=1):
+        """Fixed points sampled at many times (`AbstractField.time_sampler`).
+
+        A fixed point keeps its lateral and vertical box coordinates ``(eta, zeta)`` at every
+        time; only ``xi`` moves with the advection. So the box is interpolated bilinearly in
+        ``(y, z)`` once per point along its whole ``x`` period (one *line* of ``nx`` values,
+        already projected on the point's direction for a LOS), and each time costs one
+        linear interpolation in that line: the same trilinear value (to rounding) for two
+        gathers instead of eight. The mean field is prepared the same way (steady: sampled
+        once).
+
+        Used when it pays and fits: ``2 n_times >= nx`` (the lines cost about ``nx`` gathers
+        per point) and the lines take at most `LINE_BUDGET` numbers; otherwise every time is
+        sampled directly."""
+        points = jnp.asarray(points).astype(self.dtype)
+        n_pts = int(np.prod(points.shape[:-1], dtype=np.int64))
+        nx = self.box.shape[0]
+        width = 1 if directions is not None else 3
+        if 2 * int(n_times) < nx or n_pts * (nx + 1) * width > LINE_BUDGET:
+            return super().time_sampler(points, directions, n_times=n_times)
+        return _LineSampler.build(self, points, directions, n_times)
+
+
+#: Most numbers (points x (nx + 1) x components) `FrozenTurbulence.time_sampler` holds in
+#: lines along the wind (2^25: 256 MiB in float64) before it samples directly instead.
+LINE_BUDGET = 2**25
+
+
+class _LineSampler(TimeSampler):
+    """`FrozenTurbulence` at fixed points: per point, the box's fluctuation along the wind
+    (bilinear in ``(y, z)``, CFD frame or projected on the point's direction), ``(P, nx + 1)``
+    (``[..., 3]``) with the first node repeated last (periodic); at time ``t`` a linear
+    interpolation at ``xi0 - U t`` (reduced modulo the box length as in `sample_local_at`)."""
+
+    mean: TimeSampler
+    lines: Float[Array, "p nx1 ..."]
+    xi0: Float[Array, " p"]
+    ok: Float[Array, " p"]
+    dx: Float[Array, ""]
+    speed: Float[Array, ""]
+    length: Float[Array, ""]
+    shape: tuple[int, ...] = eqx.field(static=True)
+
+    @classmethod
+    def build(cls, field: FrozenTurbulence, points, directions, n_times):
+        box = field.box
+        nx, ny, nz = box.shape
+        lead = points.shape[:-1]
+        axes = field.axes()
+        local = jnp.einsum("ij,...j->...i", axes, points - field.anchor).reshape(-1, 3)
+        s = box.spacing
+        iy0, iy1, fy, oky = _axis(local[:, 1] / s[1] + (ny - 1) / 2, ny, box.periodic[0])
+        iz0, iz1, fz, okz = _axis(local[:, 2] / s[2], nz, box.periodic[1])
+        vel = box.velocity
+        if directions is not None:
+            d = jnp.broadcast_to(jnp.asarray(directions).astype(points.dtype), points.shape)
+            coef = jnp.einsum("ij,...j->...i", axes, d).reshape(-1, 3)  # box-frame projection
+
+        def corner(j, k):
+            return vel[:, j, k]  # (nx, P, 3)
+
+        fy_, fz_ = fy[None, :, None], fz[None, :, None]
+        c0 = corner(iy0, iz0) * (1 - fz_) + corner(iy0, iz1) * fz_
+        c1 = corner(iy1, iz0) * (1 - fz_) + corner(iy1, iz1) * fz_
+        line = c0 * (1 - fy_) + c1 * fy_  # (nx, P, 3), box axes
+        if directions is not None:
+            line = jnp.einsum("xpc,pc->px", line, coef)  # (P, nx)
+        else:
+            line = jnp.einsum("xpc,cj->pxj", line, axes)  # (P, nx, 3), CFD frame
+        line = jnp.concatenate([line, line[:, :1]], axis=1)
+        mean = field.mean.time_sampler(points, directions, n_times=n_times)
+        return cls(mean=mean, lines=line, xi0=local[:, 0] - field.shift, ok=oky & okz,
+                   dx=s[0], speed=field.speed, length=box.length, shape=tuple(lead))
+
+    def __call__(self, time):
+        dtype = self.xi0.dtype
+        time = jnp.asarray(time)
+        if not jnp.issubdtype(time.dtype, jnp.floating):
+            time = time.astype(dtype)
+        time = time.astype(dtype)
+        travelled = advected_distance(self.speed, time, self.length)
+        shape = jnp.broadcast_shapes(travelled.shape, self.shape)
+        xi0 = self.xi0.reshape(self.shape)
+        s = (xi0 - travelled) / self.dx
+        nx = self.lines.shape[1] - 1
+        fl = jnp.floor(jnp.where(jnp.isfinite(s), s, 0))
+        frac = s - fl
+        i0 = jnp.mod(fl.astype(jnp.int32), nx)
+        p = jnp.broadcast_to(jnp.arange(self.xi0.shape[0], dtype=jnp.int32).reshape(self.shape), shape)
+        flat = p * (nx + 1) + jnp.broadcast_to(i0, shape)
+        vector = self.lines.ndim == 3
+        lines = self.lines.reshape((-1, 3) if vector else (-1,))
+        v0 = lines.at[flat].get(mode="promise_in_bounds")
+        v1 = lines.at[flat + 1].get(mode="promise_in_bounds")
+        f = jnp.broadcast_to(frac, shape)
+        f = f[..., None] if vector else f
+        val = v0 * (1 - f) + v1 * f
+        ok = jnp.broadcast_to(self.ok.reshape(self.shape), shape) & jnp.isfinite(
+            jnp.broadcast_to(s, shape))
+        ok = ok[..., None] if vector else ok
+        return self.mean(time) + jnp.where(ok, val, jnp.nan)
 
 
 def frozen_turbulence(mean, box, speed, direction, **kwargs) -> FrozenTurbulence:
