@@ -312,6 +312,57 @@ def lidar_response(geometry: LidarGeometry, probe, k, *, speed=10.0, probe_model
     return amp
 
 
+def _lattice_factor(pos, k_axis, spacing, offset):
+    """Exact linear-interpolation factor of mode ``exp(i k x)`` at positions `pos` (m) on a
+    node lattice of `spacing` through `offset` (m): interpolated value / ``exp(i k pos)``,
+    ``exp(-i f theta) ((1 - f) + f exp(i theta))`` with ``f`` the fraction of the cell and
+    ``theta = k spacing``."""
+    s = (np.asarray(pos, np.float64) - offset) / spacing
+    f = s - np.floor(s)
+    theta = np.asarray(k_axis, np.float64) * spacing
+    return np.exp(-1j * f * theta) * ((1 - f) + f * np.exp(1j * theta))
+
+
+def _aliased_amplitudes(geo, probe, kk, *, speed, spacing, node_offset, n_alias, times):
+    """Lidar and point responses to one box mode as the simulator samples it (trilinear
+    between the box's nodes): for every x alias ``n`` (``k1 + 2 pi n / dx``, amplitude
+    ``sinc^2`` of the linear-interpolation kernel), the lidar's ``A_n(k)`` ``(w, ..., 3)``
+    for each of the ``w`` beam-time patterns `times` ``(w, r, b)`` and the point's scalar
+    factor, with the exact lateral/vertical interpolation factors of every probe node
+    (fixed fractions: the nodes do not move across the wind)."""
+    dx, dy, dz = spacing
+    y0, z0 = node_offset
+    k1, k2, k3 = kk[..., 0], kk[..., 1], kk[..., 2]
+    beams = np.flatnonzero(np.abs(geo.coefficients) > 1e-12 * np.max(np.abs(geo.coefficients)))
+    nodes = []
+    for b in beams:
+        m, r = geo.directions[b], float(geo.ranges[b])
+        off, w = (np.asarray(a, np.float64).reshape(-1) for a in _nodes(probe, np.asarray(r)))
+        w = np.broadcast_to(w, off.shape)
+        keep = np.abs(off) < r  # the simulator's cut at the lidar
+        off, w = off[keep], w[keep] / w[keep].sum()
+        pos = (r + off)[:, None] * m  # (q, 3)
+        # lateral and vertical parts: fixed per node, the same for every alias
+        lateral = (np.exp(1j * (k2[..., None] * pos[:, 1] + k3[..., None] * pos[:, 2]))
+                   * _lattice_factor(pos[:, 1], k2[..., None], dy, y0)
+                   * _lattice_factor(pos[:, 2], k3[..., None], dz, z0) * w)  # (..., q)
+        nodes.append((b, m, pos[:, 0], lateral))
+    pt = geo.point
+    point_yz = _lattice_factor(pt[1], k2, dy, y0) * _lattice_factor(pt[2], k3, dz, z0)
+    out = []
+    for n in range(-n_alias, n_alias + 1):
+        q1 = k1 + 2 * np.pi * n / dx
+        sx = np.sinc(q1 * dx / (2 * np.pi)) ** 2
+        amp = np.zeros((times.shape[0],) + kk.shape, np.complex128)
+        for b, m, px, lateral in nodes:
+            acc = np.sum(np.exp(1j * q1[..., None] * px) * lateral, axis=-1)
+            # (w, ...): the mean over the passes r of each pattern's time factor
+            tfac = np.mean(np.exp(-1j * np.multiply.outer(times[:, :, b], q1 * float(speed))), axis=1)
+            amp += (geo.coefficients[b] * acc * sx * tfac)[..., None] * m
+        out.append((q1, amp, sx * point_yz))
+    return out
+
+
 def lidar_variance(
     scan,
     probe,
@@ -329,6 +380,8 @@ def lidar_variance(
     component: str = "u",
     probe_model: str = "weight",
     interpolation: str | None = None,
+    node_offset: tuple[float, float] = (0.0, 0.0),
+    n_alias: int = 2,
 ) -> LidarVariance:
     """Variance of a lidar's reconstructed wind component in Mann turbulence, and of a point
     sensor at the same height (see the module docs for the model).
@@ -352,6 +405,9 @@ def lidar_variance(
       filter ``1 - sinc^2(k1 U T / 2)``; ``None`` keeps the whole variance.
     - `beam_times`: times (s) at which each beam is taken, ``(b,)``, or ``(r, b)`` for ``r``
       passes whose LOS are averaged before the reconstruction; default all at ``t = 0``.
+      With ``interpolation="nodes"`` also ``(w, r, b)``: ``w`` patterns that occur equally
+      often in a record (a Windcube's sliding windows: each new LOS closes a window with
+      its own beam times), whose lidar variances are averaged.
     - `component`: ``"u"`` (along the wind, what the horizontal speed's dispersion measures to
       first order), ``"v"`` (lateral, to the left) or ``"w"`` (up).
     - `probe_model`: ``"weight"``, ``"truncated"`` or ``"nodes"`` (see `probe_transfer`).
@@ -364,11 +420,42 @@ def lidar_variance(
       approximation), and the point sensor's by ``(2 + cos(k1 dx)) / 3`` (a sensor on a node
       column, sampled at times spread uniformly over the cells it crosses).
 
+      ``"nodes"``: exactly how `FrozenTurbulence` interpolates, node by node. Across the
+      wind every probe node and the point sensor keep their place between the box's nodes
+      (lateral and vertical fractions fixed, set by `node_offset`): each gets its exact
+      linear-interpolation factor, coherently across nodes and beams. Along the wind the
+      advection sweeps them through the cells: linear interpolation of a mode ``k1`` is the
+      sum of its aliases ``k1 + 2 pi n / dx`` (``|n| <= n_alias``) with amplitudes
+      ``sinc^2((k1 + 2 pi n / dx) dx / 2)``, each advected, probe-weighted, record-filtered
+      and summed in variance (their cross terms average out over a record whose LOS times do
+      not repeat the same positions in the cells: choose a speed for which ``U`` times the
+      revisit period of a beam is not a simple fraction of ``dx``). Needs the probe's nodes
+      (``probe_model="nodes"``).
+    - `node_offset`: ``(y, z)`` metres, for ``interpolation="nodes"``: the lidar's lateral
+      and vertical box coordinates modulo the node spacing (``(0, 0)``: it stands on a
+      column of nodes, as with `FrozenTurbulence`'s default anchor when ``ny`` is odd, or an
+      anchor half a lateral spacing off for even ``ny``).
+    - `n_alias`: aliases per side along the wind for ``interpolation="nodes"`` (2 keeps the
+      point's mean-square transfer to 0.2 % at the grid's Nyquist wavenumber).
+
     **Returns:** a `LidarVariance` (``lidar``, ``point``, ``ratio``, ``ti_ratio``).
     """
-    if interpolation not in (None, "trilinear"):
-        raise ValueError(f"lidar_variance: interpolation must be None or 'trilinear', got {interpolation!r}.")
+    if interpolation not in (None, "trilinear", "nodes"):
+        raise ValueError(f"lidar_variance: interpolation must be None, 'trilinear' or 'nodes', got "
+                         f"{interpolation!r}.")
+    if interpolation == "nodes" and probe_model != "nodes":
+        raise ValueError("lidar_variance: interpolation='nodes' needs probe_model='nodes' (it "
+                         "interpolates the probe's quadrature nodes one by one).")
+    patterns = None
+    if beam_times is not None and np.ndim(beam_times) == 3:
+        if interpolation != "nodes":
+            raise ValueError("lidar_variance: beam_times (w, r, b) (several patterns) needs "
+                             "interpolation='nodes'; give one (b,) or (r, b) pattern otherwise.")
+        patterns = np.asarray(beam_times, np.float64)
+        beam_times = patterns[0]
     geo = lidar_geometry(scan, height, direction=direction, beam_times=beam_times, component=component)
+    if interpolation == "nodes" and patterns is None:
+        patterns = geo.times[None]
     spacing = np.asarray(box_spacing, dtype=np.float64)
     (k1s, k2, k3), dk = box_wavenumbers(box_shape, box_spacing)
     n1 = len(k1s)
@@ -386,6 +473,19 @@ def lidar_variance(
         idx = keep[start:start + chunk]
         kk = np.stack(np.broadcast_arrays(half[idx, None, None], k2[None, :, None], k3[None, None, :]), -1)
         phi = mann_tensor(kk, alphaepsilon, length_scale, gamma)
+        if interpolation == "nodes":
+            quad_p_base = np.einsum("i,...ij,j->...", geo.component, phi, geo.component)
+            w = mult[idx][:, None, None]
+            for q1, amp_n, point_n in _aliased_amplitudes(
+                    geo, probe, kk, speed=speed, spacing=spacing, node_offset=node_offset,
+                    n_alias=int(n_alias), times=patterns):
+                f = (np.ones_like(q1) if record_length is None else
+                     1.0 - np.sinc(q1 * float(speed) * float(record_length) / (2 * np.pi)) ** 2)
+                quad_l = np.mean(np.real(np.einsum("w...i,...ij,w...j->w...", amp_n.conj(), phi,
+                                                   amp_n)), axis=0)
+                var_l += float(np.sum(w * f * quad_l))
+                var_p += float(np.sum(w * f * np.abs(point_n) ** 2 * quad_p_base))
+            continue
         amp = lidar_response(geo, probe, kk, speed=speed, probe_model=probe_model)
         quad_l = np.real(np.einsum("...i,...ij,...j->...", amp.conj(), phi, amp))
         quad_p = np.einsum("i,...ij,j->...", geo.component, phi, geo.component)

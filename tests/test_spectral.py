@@ -198,3 +198,41 @@ def test_mann_ensemble_variances_within_uncertainty():
             err = values.std(ddof=1) / np.sqrt(values.size)
             assert abs(values.mean() - want) < 3 * err, (name, values, want)
     assert 0.2 < model.ratio < 0.6  # the ZephIR reports well under half the point variance
+
+
+def test_node_interpolation_model_limits():
+    """``interpolation="nodes"`` (every probe node interpolated between the box's nodes as the
+    simulator does): the point sensor on a node column loses exactly the uniform-cell factor
+    ``(2 + cos(k1 dx)) / 3`` (the aliases' ``sinc^4`` sum), and on a box refined 4x the
+    lidar's variance tends to the continuous field's as ``dx^(2/3)``."""
+    scan, probe = lidarjax.windcube_v2(), lidarjax.PulsedProbe()
+    common = dict(direction=270.0, speed=9.73, record_length=600.0, probe_model="nodes")
+    coarse = dict(box_shape=(64, 16, 16), box_spacing=(8.0, 8.0, 8.0), **common)
+    nodes = spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, interpolation="nodes",
+                                    n_alias=4, **coarse)
+    cells = spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, interpolation="trilinear", **coarse)
+    np.testing.assert_allclose(nodes.point, cells.point, rtol=2e-4)
+    # interpolation loses variance: both below the continuous field's
+    cont = spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, **coarse)
+    assert nodes.lidar < cont.lidar and nodes.point < cont.point
+    # the same physical box refined 4x along each axis: the lost variance shrinks as
+    # dx^(2/3) (the loss sum_k Phi (k dx)^2 of a k^(-5/3) spectrum is set by the grid's own
+    # Nyquist scales), 4^(2/3) = 2.5x
+    fine = dict(box_shape=(256, 64, 64), box_spacing=(2.0, 2.0, 2.0), **common)
+    f_nodes = spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, interpolation="nodes", **fine)
+    f_cont = spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, **fine)
+    lost_coarse = 1 - nodes.lidar / cont.lidar
+    lost_fine = 1 - f_nodes.lidar / f_cont.lidar
+    assert 0 < lost_fine and 2.0 < lost_coarse / lost_fine < 3.2
+    # several beam-time patterns average; refused without the node model
+    pats = np.asarray([[[0, 1, 2, 3, 4]], [[-4, -3, -2, -1, 0]]], float)
+    both = spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, interpolation="nodes",
+                                   beam_times=pats, **coarse)
+    each = [spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, interpolation="nodes",
+                                    beam_times=p[0], **coarse).lidar for p in pats]
+    np.testing.assert_allclose(both.lidar, np.mean(each), rtol=1e-10)
+    with pytest.raises(ValueError, match="interpolation='nodes'"):
+        spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, beam_times=pats, **coarse)
+    with pytest.raises(ValueError, match="probe_model='nodes'"):
+        spectral.lidar_variance(scan, probe, 64.0, 30.0, 3.9, interpolation="nodes",
+                                **{**coarse, "probe_model": "weight"})
