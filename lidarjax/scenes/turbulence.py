@@ -359,19 +359,21 @@ class FrozenTurbulence(AbstractField):
         once).
 
         Used when it pays and fits: ``2 n_times >= nx`` (the lines cost about ``nx`` gathers
-        per point) and the lines take at most `LINE_BUDGET` numbers; otherwise every time is
+        per point) and building them takes at most `LINE_BUDGET` numbers; otherwise every time is
         sampled directly."""
         points = jnp.asarray(points).astype(self.dtype)
         n_pts = int(np.prod(points.shape[:-1], dtype=np.int64))
         nx = self.box.shape[0]
-        width = 1 if directions is not None else 3
-        if 2 * int(n_times) < nx or n_pts * (nx + 1) * width > LINE_BUDGET:
+        # the build holds the (nx, points, 3) cross-wind interpolation before projecting
+        if 2 * int(n_times) < nx or n_pts * (nx + 1) * 3 > LINE_BUDGET:
             return super().time_sampler(points, directions, n_times=n_times)
         return _LineSampler.build(self, points, directions, n_times)
 
 
-#: Most numbers (points x (nx + 1) x components) `FrozenTurbulence.time_sampler` holds in
-#: lines along the wind (2^25: 256 MiB in float64) before it samples directly instead.
+#: Most numbers (points x (nx + 1) x 3) `FrozenTurbulence.time_sampler` builds in lines along
+#: the wind (2^25: 256 MiB in float64) before it samples directly instead. Per field: an
+#: ensemble vmapped over fields (`simulate_statistics(..., ensemble=True)`) holds one set per
+#: member.
 LINE_BUDGET = 2**25
 
 
