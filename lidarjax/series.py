@@ -33,6 +33,8 @@ directions meteorological degrees (where the wind comes from, clockwise from nor
 
 from __future__ import annotations
 
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -120,6 +122,34 @@ class _AtTime(AbstractField):
         return self.field.los_local_at(points, directions, self._time(points))
 
 
+def _resolve_probe(fname, field, scan, heights, probe, refine, ensemble=False):
+    """The probe refined to the resolution of the field's turbulence box
+    (`lidarjax.probe.probe_for_spacing`), with a warning when no node count resolves it."""
+    box = getattr(field, "box", None)
+    if not refine or box is None or isinstance(probe, PointProbe):
+        return probe
+    from .probe import _refine_probe
+
+    try:
+        spacing = float(np.min(np.asarray(box.spacing, np.float64)))
+        n_body = np.asarray(scan.directions(), np.float64)
+        h = np.atleast_1d(np.asarray(heights, np.float64))
+    except jax.errors.TracerArrayConversionError:
+        return probe
+    ranges = h[:, None] / n_body[None, :, 2]
+    tol = 0.02
+    refined, err = _refine_probe(probe, spacing, ranges, tol, 65)
+    if err > tol:
+        warnings.warn(
+            f"{fname}: {type(probe).__name__} cannot integrate its weighting over the turbulence "
+            f"box's {spacing:g} m spacing at focus ranges up to {np.max(ranges):.0f} m (its node "
+            f"rule's transfer is off by up to {err:.2f} below the box's Nyquist wavenumber even "
+            f"with {refined.n_nodes} nodes): LOS variance at short wavelengths is aliased. Use a "
+            f"coarser box or lower heights, or refine_probe=False to keep the probe as given.",
+            stacklevel=3)
+    return refined
+
+
 def _check_span(times, schedule: Schedule, n_heights: int):
     """(start, n_cycles) from `times` = (start, duration) (host numbers)."""
     try:
@@ -193,6 +223,7 @@ def simulate_series(
     probe: AbstractProbe | None = None,
     motion: AbstractMotion | None = None,
     point_dt: float = 1.0,
+    refine_probe: bool = True,
 ) -> Series:
     """Simulate the lidar's time series: every LOS at the time it is taken.
 
@@ -207,6 +238,12 @@ def simulate_series(
     - `motion`: platform motion (`lidarjax.motion`), default none.
     - `point_dt`: sampling interval of the point sensors, s (1 Hz by default; a sonic logs
       at 10-20 Hz: 0.05).
+    - `refine_probe`: for a field with a turbulence box (`FrozenTurbulence`), integrate the
+      probe's weighting with enough quadrature nodes for the box's resolution
+      (`lidarjax.probe.probe_for_spacing`: a pulsed probe needs 25 nodes for a 4 m box,
+      where its default 9 alias waves shorter than about 40 m); the weighting is unchanged.
+      Warns when no node count resolves the box (a CW probe at long range). ``False`` keeps
+      the probe's nodes as given.
 
     **Returns:** a `Series`. Raises `ValueError` before compiling for bad inputs.
     """
@@ -220,6 +257,7 @@ def simulate_series(
         raise ValueError(f"simulate_series: `motion` must be a lidarjax motion (SinusoidalMotion,"
                          f" SampledMotion), got {type(motion).__name__}.")
     schedule.check(scan)
+    probe = _resolve_probe("simulate_series", field, scan, heights, probe, refine_probe)
     heights = jnp.atleast_1d(jnp.asarray(heights, dtype=field.dtype))
     start, duration, n_cycles = _check_span(times, schedule, heights.shape[0])
     if not point_dt > 0:
@@ -498,6 +536,7 @@ def simulate_statistics(
     ensemble: bool = False,
     chunk: int = 64,
     shard: bool = True,
+    refine_probe: bool = True,
 ) -> SeriesStatistics:
     """Statistics of many records, streamed: each record is simulated and reduced to its
     statistics inside one compiled function, so no raw LOS outlives its chunk.
@@ -516,6 +555,7 @@ def simulate_statistics(
     - `shard`: spread each chunk's records over all local devices (`jax.sharding`,
       a 1-D mesh over `jax.devices()`); the chunk is padded to a multiple of the device
       count. One device: no sharding.
+    - `refine_probe`: as in `simulate_series` (the probe's nodes resolve the box).
 
     **Returns:** `SeriesStatistics` with fields ``(r, h)`` (``(e, r, h)`` for an ensemble),
     numpy arrays on the host.
@@ -537,6 +577,7 @@ def simulate_statistics(
     schedule.check(scan)
     probe_field = jax.tree_util.tree_map(lambda a: a[0], field) if ensemble else field
     _validate(probe_field, scan, mount, np.asarray(heights), None, probe)
+    probe = _resolve_probe("simulate_statistics", field, scan, heights, probe, refine_probe)
     dtype = probe_field.dtype
     heights = jnp.atleast_1d(jnp.asarray(heights, dtype=dtype))
     _, duration, n_cycles = _check_span((0.0, record_length), schedule, heights.shape[0])

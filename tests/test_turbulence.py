@@ -274,3 +274,24 @@ def test_time_sampler_float32_long_advection_and_gradients():
 
     assert_grad_matches_fd(jax.jit(los), jnp.asarray([123.4, 9.3, 251.0, 2.0, 1.3]), eps=1e-5,
                            rtol=1e-5, atol=1e-7)
+
+
+def test_time_sampler_lines_built_in_chunks(monkeypatch):
+    """Lines are built in chunks of points (a small chunk here): same values, gradients."""
+    from lidarjax.scenes import turbulence
+
+    box, _ = mode_box()
+    f = FrozenTurbulence(scenes.uniform(9.0, 250.0), box, 9.0, 250.0)
+    rng = np.random.default_rng(3)
+    pts = jnp.asarray(rng.uniform([-150, -40, 2], [150, 40, 30], size=(3, 5, 3)))
+    dirn = jnp.asarray([0.3, -0.2, 0.9])
+    ts = jnp.asarray([[[1.0]], [[7.5]], [[300.0]]])
+    whole = _sampler_values(f, pts, dirn, ts, 1000)
+    monkeypatch.setattr(turbulence, "_LINE_CHUNK", 4)
+    chunked = eqx.filter_jit(lambda f, p, t: f.time_sampler(p, dirn, n_times=1000)(t))(f, pts, ts)
+    np.testing.assert_allclose(chunked, whole, rtol=0, atol=1e-13)
+    vec = eqx.filter_jit(lambda f, p, t: f.time_sampler(p, n_times=1000)(t))(f, pts, ts)
+    np.testing.assert_allclose(vec, sample_at(f, jnp.broadcast_to(pts, (3, 3, 5, 3)),
+                                              jnp.broadcast_to(ts, (3, 3, 5))), atol=1e-12)
+    g = jax.grad(lambda s: jnp.sum(f.time_sampler(pts * s, dirn, n_times=1000)(ts)))(1.0)
+    assert np.isfinite(float(g))

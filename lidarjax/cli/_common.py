@@ -265,7 +265,8 @@ def add_probe_arguments(parser) -> None:
                         help="probe volume: point (default), pulsed (Windcube: Gaussian pulse * "
                              "range gate) or cw (ZephIR: Lorentzian)")
     parser.add_argument("--probe-nodes", type=positive_int, default=None,
-                        help="quadrature nodes along the beam (default 9 pulsed, 17 cw)")
+                        help="quadrature nodes along the beam (default 9 pulsed, 17 cw; `series` "
+                             "adds nodes to resolve its turbulence box unless this is given)")
     parser.add_argument("--probe-scale", type=positive_float, default=None,
                         help="model scale s of the CFD (1:s); probe lengths are divided by s "
                              "(e.g. 100 for a 1:100 wind-tunnel-scale platform)")

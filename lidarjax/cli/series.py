@@ -137,10 +137,19 @@ def run(args) -> int:
 
         motion = read_motion_csv(args.motion)
     starts = np.arange(n_rec) * RECORD_LENGTH
-    print(f"lidarjax series: {args.scan} ({type(probe).__name__ if probe else 'point probe'}), "
-          f"{heights.size} heights, {n_rec} records; {info}")
+    refine = args.probe_nodes is None  # explicit --probe-nodes are kept as given
+    if refine and probe is not None and getattr(field, "box", None) is not None:
+        from ..probe import probe_for_spacing
+
+        # the nodes simulate_statistics integrates the probe with (shown here)
+        ranges = heights[:, None] / np.asarray(scan.directions())[None, :, 2]
+        probe = probe_for_spacing(probe, np.min(np.asarray(field.box.spacing)), ranges)
+    label = f"{type(probe).__name__}, {probe.n_nodes} nodes" if probe else "point probe"
+    print(f"lidarjax series: {args.scan} ({label}), {heights.size} heights, {n_rec} records; "
+          f"{info}")
     stats = simulate_statistics(field, scan, mount, heights, starts, schedule=schedule,
-                                probe=probe, motion=motion, chunk=args.chunk)
+                                probe=probe, motion=motion, chunk=args.chunk,
+                                refine_probe=refine)
     meta = {"settings": str(args.settings), "field": args.field, "scan": args.scan,
             "beta_deg": beta, "box": info, "start": str(start)}
     res = write_series_report(Path(args.out), stats, heights, starts, start_datetime=start,

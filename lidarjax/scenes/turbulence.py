@@ -359,22 +359,24 @@ class FrozenTurbulence(AbstractField):
         once).
 
         Used when it pays and fits: ``2 n_times >= nx`` (the lines cost about ``nx`` gathers
-        per point) and building them takes at most `LINE_BUDGET` numbers; otherwise every time is
+        per point) and they take at most `LINE_BUDGET` numbers; otherwise every time is
         sampled directly."""
         points = jnp.asarray(points).astype(self.dtype)
         n_pts = int(np.prod(points.shape[:-1], dtype=np.int64))
         nx = self.box.shape[0]
-        # the build holds the (nx, points, 3) cross-wind interpolation before projecting
-        if 2 * int(n_times) < nx or n_pts * (nx + 1) * 3 > LINE_BUDGET:
+        width = 1 if directions is not None else 3
+        if 2 * int(n_times) < nx or n_pts * (nx + 1) * width > LINE_BUDGET:
             return super().time_sampler(points, directions, n_times=n_times)
         return _LineSampler.build(self, points, directions, n_times)
 
 
-#: Most numbers (points x (nx + 1) x 3) `FrozenTurbulence.time_sampler` builds in lines along
-#: the wind (2^25: 256 MiB in float64) before it samples directly instead. Per field: an
-#: ensemble vmapped over fields (`simulate_statistics(..., ensemble=True)`) holds one set per
-#: member.
+#: Most numbers (points x (nx + 1) x components) `FrozenTurbulence.time_sampler` holds in
+#: lines along the wind (2^25: 256 MiB in float64) before it samples directly instead. Per
+#: field: an ensemble vmapped over fields (`simulate_statistics(..., ensemble=True)`) holds
+#: one set per member.
 LINE_BUDGET = 2**25
+#: Points per chunk when building lines (the build's (nx, chunk, 3) intermediate).
+_LINE_CHUNK = 2048
 
 
 class _LineSampler(TimeSampler):
@@ -403,21 +405,35 @@ class _LineSampler(TimeSampler):
         iy0, iy1, fy, oky = _axis(local[:, 1] / s[1] + (ny - 1) / 2, ny, box.periodic[0])
         iz0, iz1, fz, okz = _axis(local[:, 2] / s[2], nz, box.periodic[1])
         vel = box.velocity
+        n_pts = local.shape[0]
         if directions is not None:
             d = jnp.broadcast_to(jnp.asarray(directions).astype(points.dtype), points.shape)
-            coef = jnp.einsum("ij,...j->...i", axes, d).reshape(-1, 3)  # box-frame projection
-
-        def corner(j, k):
-            return vel[:, j, k]  # (nx, P, 3)
-
-        fy_, fz_ = fy[None, :, None], fz[None, :, None]
-        c0 = corner(iy0, iz0) * (1 - fz_) + corner(iy0, iz1) * fz_
-        c1 = corner(iy1, iz0) * (1 - fz_) + corner(iy1, iz1) * fz_
-        line = c0 * (1 - fy_) + c1 * fy_  # (nx, P, 3), box axes
-        if directions is not None:
-            line = jnp.einsum("xpc,pc->px", line, coef)  # (P, nx)
+            proj = jnp.einsum("ij,...j->...i", axes, d).reshape(-1, 3)  # box-frame projection
         else:
-            line = jnp.einsum("xpc,cj->pxj", line, axes)  # (P, nx, 3), CFD frame
+            proj = jnp.zeros((n_pts, 3), vel.dtype)
+
+        def lines_of(chunk):
+            """Lines of a chunk of points: (nx, C, 3) cross-wind interpolation, projected."""
+            jy0, jy1, gy, jz0, jz1, gz, c = chunk
+            gy, gz = gy[None, :, None], gz[None, :, None]
+            c0 = vel[:, jy0, jz0] * (1 - gz) + vel[:, jy0, jz1] * gz
+            c1 = vel[:, jy1, jz0] * (1 - gz) + vel[:, jy1, jz1] * gz
+            line = c0 * (1 - gy) + c1 * gy  # (nx, C, 3), box axes
+            if directions is not None:
+                return jnp.einsum("xpc,pc->px", line, c)  # (C, nx)
+            return jnp.einsum("xpc,cj->pxj", line, axes)  # (C, nx, 3), CFD frame
+
+        # in chunks of points, so the (nx, points, 3) intermediate stays small
+        per = (iy0, iy1, fy, iz0, iz1, fz, proj)
+        n_chunks = -(-n_pts // _LINE_CHUNK)
+        if n_chunks <= 1:
+            line = lines_of(per)
+        else:
+            pad = n_chunks * _LINE_CHUNK - n_pts
+            per = tuple(jnp.pad(a, [(0, pad)] + [(0, 0)] * (a.ndim - 1)) for a in per)
+            per = tuple(a.reshape((n_chunks, _LINE_CHUNK) + a.shape[1:]) for a in per)
+            line = jax.lax.map(lines_of, per)
+            line = line.reshape((n_chunks * _LINE_CHUNK,) + line.shape[2:])[:n_pts]
         line = jnp.concatenate([line, line[:, :1]], axis=1)
         mean = field.mean.time_sampler(points, directions, n_times=n_times)
         return cls(mean=mean, lines=line, xi0=local[:, 0] - field.shift, ok=oky & okz,
