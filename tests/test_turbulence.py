@@ -104,17 +104,24 @@ def test_non_periodic_gives_nan_outside_and_periodic_wraps():
                                sample_at(fp, jnp.asarray([[5.0, 0.0, 0.0]]), 0.0), atol=1e-12)
 
 
-def test_float32_long_advection():
-    """float32 stays accurate (to ~1e-5 of the amplitude) at 10 minutes, an hour and a day
-    of advection, where the advected distance is 6 km to 900 km."""
+def long_advection_pair(n_points):
+    """The same Fourier-mode box advected at 10.3 m/s in float32 and float64, and float32
+    points: ``(u, points, f32, f64)``."""
     u = float(np.float32(10.3))
     rng = np.random.default_rng(2)
-    pts = rng.uniform([-100, -40, 2], [100, 40, 30], size=(64, 3)).astype(np.float32)
-    b64, k = mode_box()
+    pts = rng.uniform([-100, -40, 2], [100, 40, 30], size=(n_points, 3)).astype(np.float32)
+    b64, _ = mode_box()
     b32, _ = mode_box(dtype=jnp.float32)
     f64 = FrozenTurbulence(scenes.uniform(0.0, 263.0), b64, u, 263.0)
     f32 = FrozenTurbulence(scenes.uniform(0.0, 263.0, dtype=jnp.float32), b32, np.float32(u),
                            np.float32(263.0))
+    return u, pts, f32, f64
+
+
+def test_float32_long_advection():
+    """float32 stays accurate (to ~1e-5 of the amplitude) at 10 minutes, an hour and a day
+    of advection, where the advected distance is 6 km to 900 km."""
+    u, pts, f32, f64 = long_advection_pair(64)
     assert f32.dtype == jnp.float32
     for t in (600.0, 3600.0, 86400.0):
         tt = np.float32(t + 0.37)
@@ -157,7 +164,10 @@ def test_vmap_over_time_and_mean_grid():
     np.testing.assert_allclose(absolute(f, grid.origin + pts), sample_at(f, pts, 0.0), atol=1e-9)
 
 
-def test_gradients_time_speed_direction_box():
+def assert_los_gradients_match_fd(los_at):
+    """Gradients of a summed LOS with respect to time, speed, direction, anchor and the box
+    values (through a scale factor) match finite differences; ``los_at(field, points,
+    direction, t)`` samples the field."""
     box, _ = mode_box(n=(16, 8, 8))
     mean = scenes.uniform(10.0, 250.0)
     pts = jnp.asarray([[13.0, 4.0, 7.0], [-31.0, 10.0, 21.0]])
@@ -166,11 +176,14 @@ def test_gradients_time_speed_direction_box():
     def los(params):
         t, u, d, ax, scale = params
         f = FrozenTurbulence(mean, box.scaled(scale), u, d, anchor=jnp.stack([ax, 0.0, 0.0]))
-        return jnp.sum(f.los_local_at(pts, dirn, t))
+        return jnp.sum(los_at(f, pts, dirn, t))
 
-    # time, speed, direction, anchor and the box values (through a scale factor)
-    assert_grad_matches_fd(jax.jit(los), jnp.asarray([123.4, 9.3, 251.0, 2.0, 1.3]), eps=1e-5, rtol=1e-5,
-                           atol=1e-7)
+    assert_grad_matches_fd(jax.jit(los), jnp.asarray([123.4, 9.3, 251.0, 2.0, 1.3]), eps=1e-5,
+                           rtol=1e-5, atol=1e-7)
+
+
+def test_gradients_time_speed_direction_box():
+    assert_los_gradients_match_fd(lambda f, p, d, t: f.los_local_at(p, d, t))
 
 
 def test_bad_input():
@@ -247,33 +260,15 @@ def test_time_sampler_steady_field_and_budget():
 def test_time_sampler_float32_long_advection_and_gradients():
     """The lines keep the float32 accuracy of direct sampling over a day, and their
     gradients (time, speed, direction, anchor, box values) match finite differences."""
-    u = float(np.float32(10.3))
-    rng = np.random.default_rng(2)
-    pts = rng.uniform([-100, -40, 2], [100, 40, 30], size=(16, 3)).astype(np.float32)
-    b64, _ = mode_box()
-    b32, _ = mode_box(dtype=jnp.float32)
-    f64 = FrozenTurbulence(scenes.uniform(0.0, 263.0), b64, u, 263.0)
-    f32 = FrozenTurbulence(scenes.uniform(0.0, 263.0, dtype=jnp.float32), b32, np.float32(u),
-                           np.float32(263.0))
+    _, pts, f32, f64 = long_advection_pair(16)
     ts = np.float32([600.37, 3600.37, 86400.37])[:, None]
     a = np.asarray(_sampler_values(f32, jnp.asarray(pts), None, jnp.asarray(ts), 1000))
     assert a.dtype == np.float32
     b = np.asarray(_sampler_values(f64, jnp.asarray(pts, jnp.float64), None,
                                    jnp.asarray(ts, jnp.float64), 1000))
     np.testing.assert_allclose(a, b, atol=2e-5)
-
-    box, _ = mode_box(n=(16, 8, 8))
-    mean = scenes.uniform(10.0, 250.0)
-    p = jnp.asarray([[13.0, 4.0, 7.0], [-31.0, 10.0, 21.0]])
-    dirn = jnp.asarray([0.3, -0.2, 0.9])
-
-    def los(params):
-        t, sp, d, ax, scale = params
-        f = FrozenTurbulence(mean, box.scaled(scale), sp, d, anchor=jnp.stack([ax, 0.0, 0.0]))
-        return jnp.sum(f.time_sampler(p, dirn, n_times=64)(jnp.stack([t, t + 3.0])[:, None]))
-
-    assert_grad_matches_fd(jax.jit(los), jnp.asarray([123.4, 9.3, 251.0, 2.0, 1.3]), eps=1e-5,
-                           rtol=1e-5, atol=1e-7)
+    assert_los_gradients_match_fd(
+        lambda f, p, d, t: f.time_sampler(p, d, n_times=64)(jnp.stack([t, t + 3.0])[:, None]))
 
 
 def test_time_sampler_lines_built_in_chunks(monkeypatch):

@@ -222,22 +222,8 @@ def check_field_file(path: PathLike) -> None:
     if path.suffix.lower() != ".npz" or not path.is_file():
         return
     with open(path, "rb") as fh:
-        try:
-            archive = np.load(fh, allow_pickle=False)
-        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
-            raise ValueError(f"{os.fspath(path)}: not a readable .npz archive ({err})") from None
-        if not hasattr(archive, "files"):
-            raise ValueError(f"{os.fspath(path)}: a single array (.npy), not an .npz archive "
-                             "with x, y, z and velocity")
-        with archive as data:
-            names = set(data.files)
-            wanted = ["x", "y", "z", "velocity"] if {"x", "y", "z", "velocity"} <= names \
-                else ["x", "y", "z", "u", "v", "w"]
-            missing = [n for n in wanted if n not in names]
-            if missing:
-                raise ValueError(
-                    f"{os.fspath(path)}: missing arrays {', '.join(missing)}; expected x, y, z "
-                    f"and u, v, w (or velocity), found {', '.join(sorted(names)) or 'none'}")
+        with _open_npz(fh, path) as data:
+            wanted = _npz_members(path, data.files)
             try:
                 for n in wanted:
                     with data.zip.open(f"{n}.npy") as member:
@@ -256,29 +242,38 @@ def check_field_file(path: PathLike) -> None:
                                  "field again") from None
 
 
+def _open_npz(fh, path: Path):
+    """``np.load`` of an open ``.npz`` file, refusing what is not a readable archive."""
+    try:
+        archive = np.load(fh, allow_pickle=False)
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
+        raise ValueError(f"{os.fspath(path)}: not a readable .npz archive ({err})") from None
+    if not hasattr(archive, "files"):
+        raise ValueError(f"{os.fspath(path)}: a single array (.npy), not an .npz archive "
+                         "with x, y, z and velocity")
+    return archive
+
+
+def _npz_members(path: Path, files) -> list[str]:
+    """The members a field archive is read from: x, y, z and velocity, or x, y, z and u, v,
+    w; raises naming the missing ones and what was found."""
+    names = set(files)
+    wanted = (["x", "y", "z", "velocity"] if {"x", "y", "z", "velocity"} <= names
+              else ["x", "y", "z", "u", "v", "w"])
+    missing = [n for n in wanted if n not in names]
+    if missing:
+        raise ValueError(
+            f"{os.fspath(path)}: missing arrays {', '.join(missing)}; expected x, y, z and u, "
+            f"v, w (or velocity), found {', '.join(sorted(names)) or 'none'}")
+    return wanted
+
+
 def _read_npz(path: Path) -> FieldArrays:
     with open(path, "rb") as fh:  # our handle: closed even when numpy gives up half-way
-        try:
-            archive = np.load(fh, allow_pickle=False)
-        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
-            raise ValueError(f"{os.fspath(path)}: not a readable .npz archive ({err})") from None
-        if not hasattr(archive, "files"):
-            raise ValueError(f"{os.fspath(path)}: a single array (.npy), not an .npz archive "
-                             "with x, y, z and velocity")
+        archive = _open_npz(fh, path)
         try:
             with archive as data:
-                names = set(data.files)
-                missing = [n for n in "xyz" if n not in names]
-                wanted = ["x", "y", "z", "velocity"] if not missing and "velocity" in names \
-                    else ["x", "y", "z", "u", "v", "w"]
-                missing = [n for n in wanted if n not in names]
-                if missing:
-                    raise ValueError(
-                        f"{os.fspath(path)}: missing arrays {', '.join(missing)}; expected x, "
-                        f"y, z and u, v, w (or velocity), found "
-                        f"{', '.join(sorted(names)) or 'none'}"
-                    )
-                arrays = {n: data[n] for n in wanted}
+                arrays = {n: data[n] for n in _npz_members(path, data.files)}
         except (OSError, EOFError, zipfile.BadZipFile, ValueError) as err:  # a cut member
             if isinstance(err, ValueError) and str(err).startswith(os.fspath(path)):
                 raise
