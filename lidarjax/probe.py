@@ -398,8 +398,12 @@ class CWProbe(AbstractProbe):
 REFINED_NODES = (9, 13, 17, 25, 33, 49, 65)
 
 
-def probe_for_spacing(probe: AbstractProbe, spacing, ranges, *, tol: float = 0.02,
-                      max_nodes: int = 65) -> AbstractProbe:
+#: Largest ``|W_q - W|`` `probe_for_spacing` accepts below the field's Nyquist wavenumber.
+TRANSFER_TOL = 0.02
+
+
+def probe_for_spacing(probe: AbstractProbe, spacing, ranges, *, tol: float = TRANSFER_TOL,
+                      max_nodes: int = REFINED_NODES[-1]) -> AbstractProbe:
     """`probe` with enough quadrature nodes to integrate its weighting over a field resolved
     to `spacing` metres (e.g. a turbulence box's smallest node spacing).
 
@@ -423,20 +427,20 @@ def probe_for_spacing(probe: AbstractProbe, spacing, ranges, *, tol: float = 0.0
     return _refine_probe(probe, spacing, ranges, tol, max_nodes)[0]
 
 
-def _refine_probe(probe, spacing, ranges, tol, max_nodes):
+def _refine_probe(probe, spacing, ranges, tol=TRANSFER_TOL, max_nodes=REFINED_NODES[-1]):
     """`probe_for_spacing`, plus the largest ``|W_q - W|`` of the probe returned (0 when
-    nothing was checked)."""
+    nothing was checked) and `tol`."""
     from .spectral import probe_transfer
 
     if isinstance(probe, PointProbe) or not hasattr(probe, "with_nodes"):
-        return probe, 0.0
+        return probe, 0.0, tol
     if not is_concrete(probe, spacing, ranges):
-        return probe, 0.0
+        return probe, 0.0, tol
     dx = float(np.min(np.asarray(spacing, np.float64)))
     r = np.asarray(ranges, np.float64).reshape(-1)
     r = r[np.isfinite(r) & (r > 0)]
     if not dx > 0 or r.size == 0:
-        return probe, 0.0
+        return probe, 0.0, tol
     check = np.unique([r.min(), np.median(r), r.max()])
     kappa = np.linspace(0.0, np.pi / dx, 257)
     exact = [probe_transfer(probe, kappa, rr, model="truncated") for rr in check]
@@ -449,4 +453,4 @@ def _refine_probe(probe, spacing, ranges, tol, max_nodes):
             best, best_err = cand, err
         if err <= tol:
             break
-    return best, best_err
+    return best, best_err, tol

@@ -60,6 +60,7 @@ from .scan import Scan, reconstruct
 from .timing import Schedule, schedule_for
 
 __all__ = ["Series", "SeriesStatistics", "simulate_series", "statistics", "simulate_statistics",
+           "probe_for_field",
            "write_series_sta", "write_series_report", "RECORD_LENGTH"]
 
 #: Seconds in one statistics record (the ``.sta`` 10-minute interval).
@@ -122,11 +123,15 @@ class _AtTime(AbstractField):
         return self.field.los_local_at(points, directions, self._time(points))
 
 
-def _resolve_probe(fname, field, scan, heights, probe, refine, ensemble=False):
-    """The probe refined to the resolution of the field's turbulence box
-    (`lidarjax.probe.probe_for_spacing`), with a warning when no node count resolves it."""
+def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractProbe,
+                    *, caller: str = "probe_for_field") -> AbstractProbe:
+    """`probe` with enough quadrature nodes for the turbulence box of `field`
+    (`lidarjax.probe.probe_for_spacing` over the focus ranges of `scan` at `heights`, m),
+    what `simulate_series` and `simulate_statistics` sample with by default. Warns (naming
+    `caller`) when no node count resolves the box. Fields without a box, the point probe and
+    traced inputs: `probe` as given."""
     box = getattr(field, "box", None)
-    if not refine or box is None or isinstance(probe, PointProbe):
+    if box is None or isinstance(probe, PointProbe):
         return probe
     from .probe import _refine_probe
 
@@ -137,11 +142,10 @@ def _resolve_probe(fname, field, scan, heights, probe, refine, ensemble=False):
     except jax.errors.TracerArrayConversionError:
         return probe
     ranges = h[:, None] / n_body[None, :, 2]
-    tol = 0.02
-    refined, err = _refine_probe(probe, spacing, ranges, tol, 65)
+    refined, err, tol = _refine_probe(probe, spacing, ranges)
     if err > tol:
         warnings.warn(
-            f"{fname}: {type(probe).__name__} cannot integrate its weighting over the turbulence "
+            f"{caller}: {type(probe).__name__} cannot integrate its weighting over the turbulence "
             f"box's {spacing:g} m spacing at focus ranges up to {np.max(ranges):.0f} m (its node "
             f"rule's transfer is off by up to {err:.2f} below the box's Nyquist wavenumber even "
             f"with {refined.n_nodes} nodes): LOS variance at short wavelengths is aliased. Use a "
@@ -171,29 +175,12 @@ def _check_span(times, schedule: Schedule, n_heights: int):
     return start, duration, n
 
 
-def _window_index(order: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """Sliding reconstruction windows over ``m`` cycles of beams taken in `order`.
-
-    Returns ``(cycle (n, b), last (n,))``: for window ``k``, the cycle each beam's latest LOS
-    comes from, and the beam just taken. Window 0 is the first complete cycle; then one
-    window per new LOS."""
-    b = order.size
-    rank = np.empty(b, int)
-    rank[order] = np.arange(b)
-    cyc = [np.zeros(b, int)]
-    last = [order[-1]]
-    for c in range(1, m):
-        for r in range(b):
-            cyc.append(c - (rank > r).astype(int))
-            last.append(order[r])
-    return np.asarray(cyc), np.asarray(last)
-
-
 def _sliding_windows(los, t_los, order):
-    """The windows of `_window_index` by static slices (no gather): LOS ``(n, h, b)`` of
-    each window and its time ``(n, h)`` (that of the beam just taken). After the first
-    complete cycle, the window closed by the ``r``-th LOS of cycle ``c`` holds beam ``j``
-    from cycle ``c - 1`` if ``j`` comes later in the order than that LOS, else from ``c``."""
+    """Sliding reconstruction windows over ``m`` cycles of beams taken in `order`, by
+    static slices (no gather): LOS ``(n, h, b)`` of each window and its time ``(n, h)``
+    (that of the beam just taken). Window 0 is the first complete cycle; then one window per
+    new LOS: the window closed by the ``r``-th LOS of cycle ``c`` holds beam ``j`` from cycle
+    ``c - 1`` if ``j`` comes later in the order than that LOS, else from ``c``."""
     m, _, b = los.shape
     order = np.asarray(order)
     rank = np.empty(b, int)
@@ -257,7 +244,8 @@ def simulate_series(
         raise ValueError(f"simulate_series: `motion` must be a lidarjax motion (SinusoidalMotion,"
                          f" SampledMotion), got {type(motion).__name__}.")
     schedule.check(scan)
-    probe = _resolve_probe("simulate_series", field, scan, heights, probe, refine_probe)
+    if refine_probe:
+        probe = probe_for_field(field, scan, heights, probe, caller="simulate_series")
     heights = jnp.atleast_1d(jnp.asarray(heights, dtype=field.dtype))
     start, duration, n_cycles = _check_span(times, schedule, heights.shape[0])
     if not point_dt > 0:
@@ -577,7 +565,8 @@ def simulate_statistics(
     schedule.check(scan)
     probe_field = jax.tree_util.tree_map(lambda a: a[0], field) if ensemble else field
     _validate(probe_field, scan, mount, np.asarray(heights), None, probe)
-    probe = _resolve_probe("simulate_statistics", field, scan, heights, probe, refine_probe)
+    if refine_probe:
+        probe = probe_for_field(field, scan, heights, probe, caller="simulate_statistics")
     dtype = probe_field.dtype
     heights = jnp.atleast_1d(jnp.asarray(heights, dtype=dtype))
     _, duration, n_cycles = _check_span((0.0, record_length), schedule, heights.shape[0])

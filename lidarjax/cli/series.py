@@ -98,7 +98,7 @@ def run(args) -> int:
     import numpy as np
 
     from ..io import read_settings
-    from ..series import RECORD_LENGTH, simulate_statistics, write_series_report
+    from ..series import RECORD_LENGTH, probe_for_field, simulate_statistics, write_series_report
     from ..timing import schedule_for
     from ._common import make_probe, make_scan
 
@@ -137,19 +137,15 @@ def run(args) -> int:
 
         motion = read_motion_csv(args.motion)
     starts = np.arange(n_rec) * RECORD_LENGTH
-    refine = args.probe_nodes is None  # explicit --probe-nodes are kept as given
-    if refine and probe is not None and getattr(field, "box", None) is not None:
-        from ..probe import probe_for_spacing
-
-        # the nodes simulate_statistics integrates the probe with (shown here)
-        ranges = heights[:, None] / np.asarray(scan.directions())[None, :, 2]
-        probe = probe_for_spacing(probe, np.min(np.asarray(field.box.spacing)), ranges)
+    if args.probe_nodes is None and probe is not None:  # explicit --probe-nodes kept as given
+        # the nodes that resolve the box, chosen here once so that they can be shown
+        probe = probe_for_field(field, scan, heights, probe, caller="lidarjax series")
     label = f"{type(probe).__name__}, {probe.n_nodes} nodes" if probe else "point probe"
     print(f"lidarjax series: {args.scan} ({label}), {heights.size} heights, {n_rec} records; "
           f"{info}")
     stats = simulate_statistics(field, scan, mount, heights, starts, schedule=schedule,
                                 probe=probe, motion=motion, chunk=args.chunk,
-                                refine_probe=refine)
+                                refine_probe=False)
     meta = {"settings": str(args.settings), "field": args.field, "scan": args.scan,
             "beta_deg": beta, "box": info, "start": str(start)}
     res = write_series_report(Path(args.out), stats, heights, starts, start_datetime=start,
