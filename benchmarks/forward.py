@@ -43,6 +43,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
+from _timing import median_time  # noqa: E402
 from scipy.interpolate import RegularGridInterpolator  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
@@ -62,15 +63,6 @@ HEIGHTS = np.arange(20.0, 220.0, 10.0)  # 20 heights
 SCAN = lj.windcube_v2(28.0)
 PROBE = lj.PulsedProbe()  # 9 nodes
 
-
-def median_time(fn, repeats: int) -> float:
-    fn()  # warm
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
 
 
 def mounts_for(s: int) -> list[lj.Mount]:

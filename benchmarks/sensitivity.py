@@ -47,6 +47,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
+from _timing import median_time  # noqa: E402
 from scipy.interpolate import RegularGridInterpolator  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
@@ -145,14 +146,6 @@ def mc_loop(interp, site, u_ref, n, seed=0):
     return std, nominal
 
 
-def median_time(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
-
 
 def main():
     parser = argparse.ArgumentParser()
@@ -185,13 +178,13 @@ def main():
         t = time.perf_counter()
         lin = budget()
         compile_s = time.perf_counter() - t
-        t_grad = median_time(budget, 7)
+        t_grad = median_time(budget, 7, warm=False)
         budget(second_order=False)
-        t_grad1 = median_time(lambda: budget(second_order=False), 7)
+        t_grad1 = median_time(lambda: budget(second_order=False), 7, warm=False)
         t = time.perf_counter()
         ref = budget(n_ref)
         compile_mc_s = time.perf_counter() - t
-        t_jax_mc = median_time(lambda: budget(n_ref), 3) * N_MC / n_ref
+        t_jax_mc = median_time(lambda: budget(n_ref), 3, warm=False) * N_MC / n_ref
         t = time.perf_counter()
         mc_std, nominal = mc_loop(interp, site, u_ref, n_loop)
         t_loop = (time.perf_counter() - t) * N_MC / n_loop
