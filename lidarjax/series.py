@@ -350,9 +350,7 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
 
     # reconstructions, as the instrument builds them
     if schedule.update == "each_los":
-        # every LOS enters b windows: computed once (XLA would otherwise fuse the sampling
-        # into the windows and repeat it b times)
-        los_w, t_rec = _sliding_windows(jax.lax.optimization_barrier(los), t_los, order)
+        los_w, t_rec = _sliding_windows(los, t_los, order)
     else:
         rot = schedule.rotations_per_height if schedule.heights_sequential else 1
         los_w = jnp.mean(los.reshape(m // rot, rot, h, b), axis=1)
@@ -431,9 +429,13 @@ def _masked_stats(x, mask, axis):
     mean = jnp.sum(xs, axis=axis) / nn
     var = jnp.sum(jnp.where(mask, (x - jnp.expand_dims(mean, axis)) ** 2, 0), axis=axis) / nn
     empty = n == 0
-    std = jnp.sqrt(jnp.where(var > 0, var, 0)) * jnp.where(var > 0, 1, 0)
     nan = jnp.nan
-    return jnp.where(empty, nan, mean), jnp.where(empty, nan, std), n
+    return jnp.where(empty, nan, mean), jnp.where(empty, nan, _std(var)), n
+
+
+def _std(var):
+    """``sqrt(var)`` with a zero (not NaN) gradient where the variance is 0."""
+    return jnp.sqrt(jnp.where(var > 0, var, 0)) * jnp.where(var > 0, 1, 0)
 
 
 def statistics(series: Series, starts: Float[ArrayLike, " r"] | None = None,
@@ -493,8 +495,7 @@ def _statistics(series: Series, starts, record_length) -> SeriesStatistics:
         cuu, cvv, cuv = (jnp.sum(du * du, 0) / nn, jnp.sum(dv * dv, 0) / nn,
                          jnp.sum(du * dv, 0) / nn)
         var_along = unit[:, 0] ** 2 * cuu + 2 * unit[:, 0] * unit[:, 1] * cuv + unit[:, 1] ** 2 * cvv
-        sonic_std = jnp.where(npk > 0, jnp.sqrt(jnp.where(var_along > 0, var_along, 0))
-                              * jnp.where(var_along > 0, 1, 0), jnp.nan)
+        sonic_std = jnp.where(npk > 0, _std(var_along), jnp.nan)
         sw, sw_std, _ = _masked_stats(vps[..., 2], pok, 0)
         return SeriesStatistics(
             speed=speed, direction=direction, speed_std=speed_std, speed_min=smin,

@@ -400,7 +400,7 @@ class _LineSampler(TimeSampler):
         nx, ny, nz = box.shape
         lead = points.shape[:-1]
         axes = field.axes()
-        local = jnp.einsum("ij,...j->...i", axes, points - field.anchor).reshape(-1, 3)
+        local = rotate(axes, points - field.anchor).reshape(-1, 3)
         s = box.spacing
         iy0, iy1, fy, oky = _axis(local[:, 1] / s[1] + (ny - 1) / 2, ny, box.periodic[0])
         iz0, iz1, fz, okz = _axis(local[:, 2] / s[2], nz, box.periodic[1])
@@ -408,7 +408,7 @@ class _LineSampler(TimeSampler):
         n_pts = local.shape[0]
         if directions is not None:
             d = jnp.broadcast_to(jnp.asarray(directions).astype(points.dtype), points.shape)
-            proj = jnp.einsum("ij,...j->...i", axes, d).reshape(-1, 3)  # box-frame projection
+            proj = rotate(axes, d).reshape(-1, 3)  # box-frame projection
         else:
             proj = jnp.zeros((n_pts, 3), vel.dtype)
 
