@@ -77,7 +77,7 @@ def spacing_for(n_cells: float) -> float:
 def write_hemisphere_case(case: Path, n_cells: float) -> dict:
     import lidarjax as lj
     from lidarjax.io import _cells
-    from lidarjax.io._foamwrite import hex_mesh, write_polymesh, write_vector_field
+    from tests._foamwrite import hex_mesh, write_polymesh, write_vector_field
 
     h = spacing_for(n_cells)
     x, y, z = axes_for(h)

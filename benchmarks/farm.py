@@ -45,8 +45,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
+from lidarjax.disturbed_sectors import disturbed_sectors, in_sectors, merge_sectors  # noqa: E402
 from lidarjax.scenes import farm as fm  # noqa: E402
-from lidarjax.sectors import disturbed_sectors, in_sectors, merge_sectors  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 D, HUB, SPEED = 126.0, 90.0, 8.0
@@ -172,7 +172,7 @@ def inverse_error(quick):
     def sims(d):
         def one(di):
             g = eqx.tree_at(lambda x: x.direction, farm, di)
-            return lj.simulate(g, scan, mount, heights, u_ref=SPEED * lj.scenes.heading(di),
+            return lj.simulate(g, scan, mount, heights, u_ref=SPEED * lj.heading(di),
                                probe=probe, point_reference=False)
         return jax.vmap(one)(d)
 

@@ -50,8 +50,9 @@ from scipy.optimize import least_squares  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
 from lidarjax import zephycube as zc  # noqa: E402
+from lidarjax.angles import heading  # noqa: E402
 from lidarjax.field import AbstractField  # noqa: E402
-from lidarjax.scenes import Hemisphere, heading, hemisphere  # noqa: E402
+from lidarjax.scenes import Hemisphere, hemisphere  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 RADIUS = 20.0

@@ -166,7 +166,7 @@ def main():
         field = lj.GridField.from_function(scene.sample, *site["axes"])
         interp = RegularGridInterpolator(site["axes"], np.asarray(field.velocity), method="linear",
                                          bounds_error=False, fill_value=np.nan)
-        u_ref = 10.0 * np.asarray(lj.scenes.heading(250.0))
+        u_ref = 10.0 * np.asarray(lj.heading(250.0))
         mount = lj.Mount(site["location"], pitch=PITCH, roll=ROLL)
         h = site["heights"]
 

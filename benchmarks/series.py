@@ -40,10 +40,10 @@ import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 import lidarjax
-from lidarjax.scenes import FrozenTurbulence, TurbulenceBox
+from lidarjax.scenes import FrozenTurbulence
 from lidarjax.series import probe_for_field, simulate_statistics
 from lidarjax.spectral import lidar_variance
-from lidarjax.turbulence_box import fft_mann_box
+from lidarjax.turbulence import TurbulenceBox, fft_mann_box
 
 HERE = Path(__file__).parent
 U, DIRECTION = 10.0, 270.0

@@ -56,8 +56,8 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
-from lidarjax.inverse import InverseFlag  # noqa: E402
-from lidarjax.scenes import heading  # noqa: E402
+from lidarjax.angles import heading  # noqa: E402
+from lidarjax.flags import InverseFlag  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 F32, F64 = np.float32, np.float64

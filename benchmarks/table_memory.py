@@ -3,7 +3,7 @@
 Each run is a (n, n, n/2) float64 GridField saved as .npz (a hemisphere 'platform' flow);
 the table is built (Windcube V2, pulsed probe) by
 
-- `streamed`: `lidarjax.workflow.build_table` (one run at a time, cropped to where the beams
+- `streamed`: `lidarjax.workflows.seed_tables.build_table` (one run at a time, cropped to where the beams
   look, then dropped);
 - `all-at-once`: the previous way, `simulate_settings` (every run loaded, then stacked and
   simulated in one vmapped batch), the baseline.
@@ -31,7 +31,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np
 import lidarjax as lj
 from lidarjax.io import Settings, load_field
-from lidarjax.workflow import build_table, simulate_settings
+from lidarjax.workflows.seed_tables import build_table, simulate_settings
 mode, n_runs, d = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 betas = [float(b) for b in np.arange(n_runs) * (360.0 / n_runs)]
 st = Settings(zone=2, verbose=1, height=60.0, nh=4, gamma=0.0, beta=0.0, psi=180.0, epsilon=0.0,

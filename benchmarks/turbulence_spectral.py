@@ -3,7 +3,7 @@ spectral model (Sathe et al. 2011), with the ensemble's statistical uncertainty.
 
 What it runs: an ensemble of periodic Mann boxes (L = 33.6 m, Gamma = 3.9, the IEC values;
 512 x 64 x 64 nodes at 4 m: 2048 x 256 x 256 m) synthesised with the exact discrete spectrum
-(`lidarjax.spectral.synthesize_box`), advected at 10 m/s over a uniform 10 m/s mean wind
+(`lidarjax.turbulence.synthesize_box`), advected at 10 m/s over a uniform 10 m/s mean wind
 (`lidarjax.scenes.FrozenTurbulence`). In every box a Windcube V2 (pulsed probe, full scale)
 and a ZephIR (50 LOS, CW probe, full scale) measure at 100 m for one box period (204.8 s,
 the record), from two lateral positions half a box apart, every beam of a scan at the same
@@ -97,7 +97,7 @@ def main(quick: bool) -> None:
     samples = {(name, d): ([], []) for name in INSTRUMENTS for d in directions}
     t0 = time.perf_counter()
     for seed in range(n_boxes):
-        box = spectral.synthesize_box(shape, spacing, 1.0, L, GAMMA, seed=seed)
+        box = lj.synthesize_box(shape, spacing, 1.0, L, GAMMA, seed=seed)
         for name, (scan, probe) in INSTRUMENTS.items():
             for d in directions:
                 for y0 in y_positions:

@@ -1,35 +1,73 @@
-"""lidarjax: differentiable wind-lidar simulation in CFD fields and free-stream correction."""
+"""lidarjax: differentiable wind-lidar simulation in CFD fields and free-stream correction.
+
+**The public API is flat** (as optimistix's): every public function and class of the core and
+of the workflows is ``lidarjax.<name>``. Three families of alternatives are namespaces:
+``lidarjax.scenes`` (flows defined by formulas), ``lidarjax.io`` (file readers and writers) and
+``lidarjax.plots`` (figures, optional extra ``plot``). Modules are the implementation; their
+constants (``lidarjax.sensitivity.OUTPUTS``) are reached through them.
+
+**Layers**, each importing only the ones above it in this list, at module top:
+
+1. the core (the differentiable model): ``frames``, ``angles``, ``mount``, ``scan``, ``probe``,
+   ``field``, ``forward``, ``batch``, ``response``, ``inverse``, ``sensitivity``, ``timing``,
+   ``motion``, ``series``, ``spectral``, ``turbulence`` and the others at the package root;
+2. ``scenes/``: analytic flows, wind farms, frozen turbulence;
+3. ``io/``: one module per file-format family;
+4. ``plots.py``: figures of the core's results (matplotlib, imported only when drawing);
+5. ``workflows/``: files in, files out (seed tables, records correction, CFD monitor points,
+   series reports, the farm study, the demo);
+6. ``cli/``: parses arguments, calls one workflow or core function, writes and prints.
+
+``tests/test_layers.py`` enforces it.
+"""
 
 import importlib.metadata
 
+from . import _deprecated
 from . import io as io
+from . import plots as plots
 from . import scenes as scenes
-from . import sectors as sectors
-from . import zephycube as zephycube
 from .angles import direction_difference as direction_difference
+from .angles import heading as heading
 from .angles import horizontal_speed as horizontal_speed
 from .angles import seed_azimuth as seed_azimuth
 from .angles import wind_direction as wind_direction
 from .angles import wrap180 as wrap180
-from .batch import simulate_sectors as simulate_sectors
+from .batch import simulate_rotations as simulate_rotations
 from .batch import stack_fields as stack_fields
 from .batch import stack_mounts as stack_mounts
 from .batch import unstack_field as unstack_field
-from .cfd_probes import ProbeField as ProbeField
-from .cfd_probes import ProbeLocations as ProbeLocations
-from .cfd_probes import probe_locations as probe_locations
-from .cfd_probes import simulate_from_probes as simulate_from_probes
 from .corrections import correction_factors as correction_factors
+from .disturbed_sectors import DisturbedSector as DisturbedSector
+from .disturbed_sectors import disturbed_sectors as disturbed_sectors
+from .disturbed_sectors import excluded_width as excluded_width
+from .disturbed_sectors import in_sectors as in_sectors
+from .disturbed_sectors import merge_sectors as merge_sectors
 from .field import AbstractField as AbstractField
 from .field import GridField as GridField
+from .flags import BLOCKING_FLAGS as BLOCKING_FLAGS
+from .flags import MIN_AVAILABILITY as MIN_AVAILABILITY
 from .flags import Flag as Flag
+from .flags import InverseFlag as InverseFlag
+from .flags import RecordFlag as RecordFlag
 from .footprint import scan_bounds as scan_bounds
 from .forward import Simulation as Simulation
 from .forward import simulate as simulate
-from .inverse import InverseFlag as InverseFlag
+from .frames import beam_directions as beam_directions
+from .frames import body_to_cfd_rotation as body_to_cfd_rotation
+from .frames import cfd_to_lidar_rotation as cfd_to_lidar_rotation
+from .frames import cfd_to_north_rotation as cfd_to_north_rotation
+from .frames import lidar_to_cfd_rotation as lidar_to_cfd_rotation
+from .frames import lidar_to_north_rotation as lidar_to_north_rotation
+from .frames import rotate as rotate
+from .frames import rotation_x as rotation_x
+from .frames import rotation_y as rotation_y
+from .frames import rotation_z as rotation_z
+from .frames import tilt_rotation as tilt_rotation
 from .inverse import Inversion as Inversion
 from .inverse import invert as invert
 from .inverse import invert_reconstructed as invert_reconstructed
+from .motion import AbstractMotion as AbstractMotion
 from .motion import SampledMotion as SampledMotion
 from .motion import SinusoidalMotion as SinusoidalMotion
 from .mount import Mount as Mount
@@ -37,7 +75,8 @@ from .probe import AbstractProbe as AbstractProbe
 from .probe import CWProbe as CWProbe
 from .probe import PointProbe as PointProbe
 from .probe import PulsedProbe as PulsedProbe
-from .records import RecordFlag as RecordFlag
+from .probe import probe_for_spacing as probe_for_spacing
+from .probe import probe_transfer as probe_transfer
 from .response import PeriodicSpline as PeriodicSpline
 from .response import ResponseTable as ResponseTable
 from .roses import CorrectionRose as CorrectionRose
@@ -57,15 +96,60 @@ from .sensitivity import sensitivity as sensitivity
 from .sensitivity import uncertainty as uncertainty
 from .series import Series as Series
 from .series import SeriesStatistics as SeriesStatistics
+from .series import probe_for_field as probe_for_field
 from .series import simulate_series as simulate_series
 from .series import simulate_statistics as simulate_statistics
 from .series import statistics as statistics
-from .series import write_series_sta as write_series_sta
+from .spectral import LidarGeometry as LidarGeometry
+from .spectral import LidarVariance as LidarVariance
+from .spectral import lidar_geometry as lidar_geometry
+from .spectral import lidar_response as lidar_response
+from .spectral import lidar_variance as lidar_variance
+from .spectral import lidar_variance_ratio as lidar_variance_ratio
+from .spectral import reconstruction_coefficients as reconstruction_coefficients
 from .timing import Schedule as Schedule
 from .timing import schedule_for as schedule_for
+from .turbulence import TurbulenceBox as TurbulenceBox
+from .turbulence import box_variance as box_variance
+from .turbulence import box_wavenumbers as box_wavenumbers
+from .turbulence import fft_mann_box as fft_mann_box
+from .turbulence import mann_box as mann_box
+from .turbulence import mann_eddy_lifetime as mann_eddy_lifetime
+from .turbulence import mann_spectrum_level as mann_spectrum_level
+from .turbulence import mann_tensor as mann_tensor
+from .turbulence import synthesize_box as synthesize_box
+from .workflows.demo import run_demo as run_demo
+from .workflows.monitor_points import MonitorPointField as MonitorPointField
+from .workflows.monitor_points import MonitorPoints as MonitorPoints
+from .workflows.monitor_points import monitor_points as monitor_points
+from .workflows.monitor_points import simulate_from_monitor_points as simulate_from_monitor_points
+from .workflows.records import DEFAULT_MIN_AVAILABILITY as DEFAULT_MIN_AVAILABILITY
+from .workflows.records import CorrectedRecords as CorrectedRecords
+from .workflows.records import RecordSet as RecordSet
+from .workflows.records import check_instrument as check_instrument
+from .workflows.records import correct_records as correct_records
+from .workflows.records import load_records as load_records
+from .workflows.records import match_heights as match_heights
+from .workflows.records import quality_summary as quality_summary
+from .workflows.records import reported_noise as reported_noise
+from .workflows.records import tilt_difference as tilt_difference
+from .workflows.records import write_corrected_csv as write_corrected_csv
+from .workflows.records import write_corrected_netcdf as write_corrected_netcdf
+from .workflows.seed_tables import build_table as build_table
+from .workflows.seed_tables import simulate_settings as simulate_settings
+from .workflows.series_report import write_series_report as write_series_report
+from .zephycube import NormalisedRose as NormalisedRose
+from .zephycube import ZephyCubeWind as ZephyCubeWind
+from .zephycube import beam_layout as beam_layout
+from .zephycube import homogeneous_wind as homogeneous_wind
+from .zephycube import normalised_rose as normalised_rose
+from .zephycube import scalar_correction as scalar_correction
+from .zephycube import vector_correction as vector_correction
 
 try:
     __version__ = importlib.metadata.version("lidarjax")
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
-from . import spectral as spectral
+
+_deprecated.install()
+__getattr__ = _deprecated.deprecated_getattr(__name__)

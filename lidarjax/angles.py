@@ -28,6 +28,7 @@ __all__ = [
     "direction_difference",
     "wrap180",
     "seed_azimuth",
+    "heading",
 ]
 
 def _calm_mask(u, v):
@@ -135,3 +136,11 @@ def seed_azimuth(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     """
     d = wind_direction(velocity)
     return jnp.mod(d + 90.0, 360.0)
+
+
+def heading(direction_deg, dtype=None) -> Float[Array, 3]:
+    """Unit horizontal vector the wind blows *towards* for a meteorological direction."""
+    d = jnp.deg2rad(jnp.asarray(direction_deg, dtype=dtype))
+    return jnp.stack([-jnp.sin(d), -jnp.cos(d), jnp.zeros_like(d)])
+
+

@@ -1,4 +1,4 @@
-"""Many scenes at once: stacked fields and `simulate_sectors`.
+"""Many scenes at once: stacked fields and `simulate_rotations`.
 
 `lidarjax.simulate` is a pure jit-compiled function, so `jax.vmap` batches it over anything
 numeric: inflow directions (fields), mounts, cone angles, heights, probe parameters. Only the
@@ -13,7 +13,7 @@ def one(velocity, mount, u_ref):
 sims = jax.vmap(one)(stacked.velocity, lidarjax.stack_mounts(mounts), u_refs)
 
 # or, for that common case, the same in one call:
-sims = lidarjax.simulate_sectors(fields, scan, mounts, heights, u_refs=u_refs)
+sims = lidarjax.simulate_rotations(fields, scan, mounts, heights, u_refs=u_refs)
 
 # a cone-angle sweep in one field
 sims = jax.vmap(lambda c: lidarjax.simulate(field, lidarjax.windcube_v1(c), mount, heights))(
@@ -44,7 +44,7 @@ from .mount import Mount
 from .probe import AbstractProbe, PointProbe
 from .scan import Scan
 
-__all__ = ["stack_fields", "unstack_field", "stack_mounts", "simulate_sectors"]
+__all__ = ["stack_fields", "unstack_field", "stack_mounts", "simulate_rotations"]
 
 
 def stack_fields(fields: Sequence[AbstractField]) -> AbstractField:
@@ -140,7 +140,7 @@ _sectors_jit = jax.jit(
 )
 
 
-def simulate_sectors(
+def simulate_rotations(
     fields: AbstractField | Sequence[AbstractField],
     scan: Scan,
     mounts: Mount | Sequence[Mount],
@@ -168,10 +168,10 @@ def simulate_sectors(
     (e.g. ``los`` is ``(s, h, b)``), equal to stacking `simulate` for each sector.
     """
     field, mount, u_refs, heights, probe, (field_axis, mount_axis, uref_axis), given = \
-        sector_arguments("simulate_sectors", fields, scan, mounts, heights, u_refs, probe)
+        rotation_arguments("simulate_rotations", fields, scan, mounts, heights, u_refs, probe)
     if not given:
         raise ValueError(
-            "simulate_sectors: nothing to batch; give a list or stack of fields, of mounts or "
+            "simulate_rotations: nothing to batch; give a list or stack of fields, of mounts or "
             "of u_refs (or call lidarjax.simulate)."
         )
     return _sectors_jit(
@@ -180,9 +180,9 @@ def simulate_sectors(
     )
 
 
-def sector_arguments(fname, fields, scan, mounts, heights, u_refs, probe, *,
+def rotation_arguments(fname, fields, scan, mounts, heights, u_refs, probe, *,
                      names=("mounts", "u_refs")):
-    """Normalise the sector arguments of `simulate_sectors` (and of `lidarjax.sensitivity`):
+    """Normalise the sector arguments of `simulate_rotations` (and of `lidarjax.sensitivity`):
     stack field and mount lists, find which of fields, mounts and free streams carry the
     sector axis, check their counts agree, and validate one sector as `simulate` would,
     before compiling.

@@ -55,7 +55,7 @@ def scan_bounds(
 
     - `scan`, `heights`, `probe`, `point_reference`: as given to `lidarjax.simulate`.
     - `mounts`: one `Mount`, a list, or a stacked `Mount` (the union of their boxes, e.g.
-      all sectors of `lidarjax.simulate_sectors`).
+      all sectors of `lidarjax.simulate_rotations`).
 
     The box is tight (no margin): `lidarjax.GridField.crop` adds the interpolation margin.
     Needs concrete numbers (call it outside `jax.jit`).

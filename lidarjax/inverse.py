@@ -38,8 +38,6 @@ Directions are meteorological (from, degrees clockwise from north) in ``[0, 360)
 
 from __future__ import annotations
 
-import enum
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -49,31 +47,15 @@ import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._precision import default_float, is_concrete
+from .flags import InverseFlag
 from .response import PeriodicSpline, ResponseTable, locate
 
-__all__ = ["Inversion", "InverseFlag", "invert", "invert_reconstructed", "default_solver"]
+__all__ = ["Inversion", "invert", "invert_reconstructed", "default_solver"]
 
 #: Default number of problems (record-heights) solved together in one vmapped batch (rounded
 #: down to whole records). Small batches waste little on their slowest member; measured best
 #: on CPU between 256 and 1024 (benchmarks/inverse.py).
 DEFAULT_BATCH_SIZE = 512
-
-
-class InverseFlag(enum.IntFlag):
-    """Why an inversion result is NaN or doubtful (bitmask in `Inversion.flags`). ``OK`` is 0."""
-
-    OK = 0
-    #: Fewer than `min_beams` finite, positively weighted beams: result NaN, not converged.
-    TOO_FEW_BEAMS = 1
-    #: The solver did not converge within `max_steps` (or met non-finite values): NaN.
-    NOT_CONVERGED = 2
-    #: The usable beams cannot tell the direction (``[R, dR/dd]`` is rank deficient): NaN.
-    ILL_CONDITIONED = 4
-    #: The best fit is zero speed: `direction` is NaN and `direction_std` inf.
-    CALM = 8
-    #: No noise level was given and there are no spare beams to estimate it (two beams for
-    #: two unknowns): the standard deviations are NaN.
-    NO_NOISE_ESTIMATE = 16
 
 
 class Inversion(eqx.Module):

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from .forward import simulate
 
 __all__ = ["plot_profiles", "plot_los_fit", "plot_roses", "plot_sensitivity", "sensitivity_map",
            "plot_budget", "plot_sensitivity_profiles", "plot_series_ti", "plot_farm_map"]
@@ -102,7 +105,7 @@ def plot_roses(directions, speed_ratio, direction_addend, labels, path, *, title
     **Arguments:** `directions` ``(d,)`` meteorological degrees; `speed_ratio` and
     `direction_addend` ``(d, h)`` (addend in degrees); `labels` one per column ``h``;
     `shade`: optional ``(start, end)`` direction intervals in degrees (e.g. merged disturbed
-    sectors from `lidarjax.sectors.merge_sectors`) shaded grey on both roses.
+    sectors from `lidarjax.disturbed_sectors.merge_sectors`) shaded grey on both roses.
     """
     plt = _pyplot()
     fig = plt.figure(figsize=(11, 5))
@@ -135,9 +138,6 @@ def sensitivity_map(field, scan, mount, height, *, u_ref=None, probe=None):
     `u_ref`. Returns ``(nx, ny, nz)`` magnitudes ``|d error / d V_node|`` (per m/s of node
     velocity; dimensionless): which part of the flow drives the error.
     """
-    import equinox as eqx
-
-    from .forward import simulate
 
     def error(vel):
         f = eqx.tree_at(lambda fld: fld.velocity, field, vel)

@@ -81,7 +81,7 @@ from scipy import special
 
 from ._precision import default_float, is_concrete
 
-__all__ = ["AbstractProbe", "PointProbe", "PulsedProbe", "CWProbe", "probe_for_spacing"]
+__all__ = ["AbstractProbe", "PointProbe", "PulsedProbe", "CWProbe", "probe_for_spacing", "probe_transfer"]
 
 #: Speed of light in vacuum, m/s (for converting pulse durations to lengths).
 SPEED_OF_LIGHT = 299_792_458.0
@@ -430,7 +430,6 @@ def probe_for_spacing(probe: AbstractProbe, spacing, ranges, *, tol: float = TRA
 def _refine_probe(probe, spacing, ranges, tol=TRANSFER_TOL, max_nodes=REFINED_NODES[-1]):
     """`probe_for_spacing`, plus the largest ``|W_q - W|`` of the probe returned (0 when
     nothing was checked) and `tol`."""
-    from .spectral import probe_transfer
 
     if isinstance(probe, PointProbe) or not hasattr(probe, "with_nodes"):
         return probe, 0.0, tol
@@ -454,3 +453,66 @@ def _refine_probe(probe, spacing, ranges, tol=TRANSFER_TOL, max_nodes=REFINED_NO
         if err <= tol:
             break
     return best, best_err, tol
+
+
+def probe_transfer(probe, kappa, focus_range, *, model: str = "weight"):
+    """Fourier transform ``W(kappa) = int phi(o) exp(i kappa o) do`` of a probe's range
+    weighting along the beam (real: the weightings are even), at wavenumbers `kappa` (rad/m,
+    the wavevector's component along the beam) and focus range `focus_range` (m).
+
+    `model`:
+
+    - ``"weight"``: the untruncated weighting, in closed form. `lidarjax.PulsedProbe`: a
+      Gaussian pulse of ``rp = fwhm / (2 sqrt(ln 2))`` convolved with the gate ``Dp``:
+      ``exp(-kappa^2 rp^2 / 4) sinc(kappa Dp / 2)``. `lidarjax.CWProbe`: the Lorentzian of
+      half width ``G``: ``exp(-G |kappa|)``. `lidarjax.PointProbe`: 1.
+    - ``"truncated"``: the weighting truncated to the probe's support and renormalised, as
+      the simulator uses it (dense Gauss-Legendre quadrature of ``probe.weight``).
+    - ``"nodes"``: exactly what the simulator computes, ``sum_q w_q cos(kappa o_q)`` over
+      the probe's quadrature nodes.
+    """
+    kappa = np.asarray(kappa, dtype=np.float64)
+    r = float(np.asarray(focus_range, dtype=np.float64))
+    if isinstance(probe, PointProbe):
+        return np.ones_like(kappa)
+    if model == "weight":
+        if isinstance(probe, PulsedProbe):
+            rp = float(probe.pulse_fwhm) / (2 * np.sqrt(np.log(2.0)))
+            dp = float(probe.gate_length)
+            return np.exp(-(kappa * rp) ** 2 / 4) * np.sinc(kappa * dp / (2 * np.pi))
+        if isinstance(probe, CWProbe):
+            g = float(probe.hwhm(r))
+            return np.exp(-g * np.abs(kappa))
+        raise ValueError(f"probe_transfer: no closed form for {type(probe).__name__}; use model='nodes'.")
+    if model == "truncated":
+        x, w = _legendre(2000)
+        half, phi = _truncated_weight(probe, x, np.asarray(r))
+        o = float(half) * x
+        phi = np.asarray(phi, dtype=np.float64) * w
+        phi = phi / phi.sum()
+        return np.cos(np.multiply.outer(kappa, o)) @ phi
+    if model == "nodes":
+        offsets, weights = _nodes(probe, np.asarray(r))
+        o = np.asarray(offsets, np.float64).reshape(-1)
+        wq = np.broadcast_to(np.asarray(weights, np.float64).reshape(-1), o.shape)
+        wq = wq / wq.sum()
+        return np.cos(np.multiply.outer(kappa, o)) @ wq
+    raise ValueError(f"probe_transfer: model must be 'weight', 'truncated' or 'nodes', got {model!r}.")
+
+
+@functools.lru_cache(maxsize=4)
+def _legendre(n):
+    return special.roots_legendre(n)
+
+
+@eqx.filter_jit
+def _truncated_weight(probe, x, r):
+    half = probe.support(r)
+    return half, probe.weight(half * x, r)
+
+
+@eqx.filter_jit
+def _nodes(probe, r):
+    return probe.nodes(jnp.asarray(r))
+
+

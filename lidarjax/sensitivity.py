@@ -50,7 +50,7 @@ angles (no 0/360 branch), and in Monte Carlo and finite differences their deviat
 wrapped to ``(-180, 180]``. Units of ``jacobian[out][..., i]`` are ``unit(out) per
 unit(input i)``: m/s per m, m/s per degree, degrees per degree, ...
 
-Batches: like `lidarjax.simulate_sectors`, `field` may be a list (or stack) of fields and
+Batches: like `lidarjax.simulate_rotations`, `field` may be a list (or stack) of fields and
 `mount` a list (or stack) of mounts, ``u_ref`` ``(s, 3)``; every result then carries the
 sector axis ``s`` first.
 """
@@ -66,15 +66,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .angles import horizontal_speed, wind_direction, wrap180
-from .batch import _is_stacked, _n_stacked, sector_arguments, unstack_field
+from .angles import heading, horizontal_speed, wind_direction, wrap180
+from .batch import _is_stacked, _n_stacked, rotation_arguments, unstack_field
 from .corrections import DEFAULT_RATIO_TOL
 from .field import AbstractField, GridField
 from .forward import _simulate
+from .inverse import invert
 from .mount import Mount
 from .probe import AbstractProbe
+from .response import ResponseTable
 from .scan import Scan
-from .scenes import heading
 
 __all__ = ["Sensitivity", "Budget", "sensitivity", "uncertainty", "budget_columns", "INPUTS", "OUTPUTS",
            "ANGLE_OUTPUTS"]
@@ -318,7 +319,7 @@ def _jacobian_batch(field, scan, mount, heights, u_ref, probe, cfg, axes):
 
 
 def _prepare(fname, field, scan, mount, heights, u_ref, probe, names, outputs, inverse=False):
-    field, mount, u_ref, heights, probe, axes, given = sector_arguments(
+    field, mount, u_ref, heights, probe, axes, given = rotation_arguments(
         fname, field, scan, mount, heights, u_ref, probe, names=("mount", "u_ref"))
     field_axis, mount_axis, uref_axis = axes
     n_sectors = next(iter(given.values())) if given else None
@@ -462,7 +463,7 @@ def sensitivity(
 
     - `field`, `scan`, `mount`, `heights`, `u_ref`, `probe`, `ratio_tol`: as for
       `lidarjax.simulate`; `field` and `mount` may also be lists or stacks of one per sector
-      and `u_ref` ``(s, 3)``, as for `lidarjax.simulate_sectors`. Without `u_ref`, a scene
+      and `u_ref` ``(s, 3)``, as for `lidarjax.simulate_rotations`. Without `u_ref`, a scene
       with its own ``speed`` and ``direction`` (uniform, hemisphere, hill) supplies its free
       stream ``speed * heading(direction)``.
     - `wrt`: input names (module docs): ``location`` (= ``x, y, z``), ``beta``, ``gamma``,
@@ -643,8 +644,6 @@ def _mc_stats(samples, nominal, name):
 
 
 def _inverse_fn(table):
-    from .inverse import invert
-
     def inv(los):  # (..., h, b) -> dict of (..., h)
         r = invert(table, los, batch_size=None)
         return {"inv_speed": r.speed, "inv_direction": r.direction}
@@ -834,8 +833,6 @@ def uncertainty(
     names = _expand(list(std), fname)
     std_in, corr = _covariance(names, std, correlation, fname)
     if table is not None:
-        from .response import ResponseTable
-
         if not isinstance(table, ResponseTable):
             raise ValueError(f"{fname}: `table` must be a lidarjax.ResponseTable.")
     if outputs is None:

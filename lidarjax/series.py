@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._deprecated import deprecated_getattr
 from ._precision import difference
 from .angles import horizontal_speed, wind_direction
 from .field import AbstractField
@@ -55,13 +56,12 @@ from .frames import (
 )
 from .motion import AbstractMotion
 from .mount import Mount
-from .probe import AbstractProbe, PointProbe
+from .probe import AbstractProbe, PointProbe, _refine_probe
 from .scan import Scan, reconstruct
 from .timing import Schedule, schedule_for
 
 __all__ = ["Series", "SeriesStatistics", "simulate_series", "statistics", "simulate_statistics",
-           "probe_for_field",
-           "write_series_sta", "write_series_report", "RECORD_LENGTH"]
+           "probe_for_field", "RECORD_LENGTH"]
 
 #: Seconds in one statistics record (the ``.sta`` 10-minute interval).
 RECORD_LENGTH = 600.0
@@ -133,7 +133,6 @@ def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractPr
     box = getattr(field, "box", None)
     if box is None or isinstance(probe, PointProbe):
         return probe
-    from .probe import _refine_probe
 
     try:
         spacing = float(np.min(np.asarray(box.spacing, np.float64)))
@@ -628,72 +627,4 @@ def _record_stats_fn(n_cycles, n_points, order, record_length, ensemble, repeat)
     return fn
 
 
-def write_series_sta(path, stats: SeriesStatistics, heights, record_ends, *,
-                     scan: Scan | None = None, direction_offset: float = 0.0,
-                     system: str = "lidarjax simulated series"):
-    """Write `SeriesStatistics` ``(r, h)`` as a Windcube ``.sta`` (`lidarjax.io.write_sta`).
-
-    `record_ends`: ``(r,)`` datetime64 (end of each 10-minute interval, as ``.sta`` stamps
-    them). Writes speed, dispersion, min, max, direction, Z-wind, its dispersion and
-    availability. Returns the path written."""
-    from .io import write_sta
-
-    return write_sta(path, np.asarray(record_ends, dtype="datetime64[s]"), np.asarray(heights),
-                     np.asarray(stats.speed), np.asarray(stats.direction), w=np.asarray(stats.w),
-                     speed_std=np.asarray(stats.speed_std), availability=np.asarray(stats.availability),
-                     speed_min=np.asarray(stats.speed_min), speed_max=np.asarray(stats.speed_max),
-                     w_std=np.asarray(stats.w_std),
-                     scan_angle=None if scan is None else float(scan.cone_angle),
-                     direction_offset=direction_offset, system=system)
-
-
-
-_STAT_UNITS = {"speed": "m/s", "direction": "deg", "speed_std": "m/s", "speed_min": "m/s",
-               "speed_max": "m/s", "w": "m/s", "w_std": "m/s", "availability": "%", "ti": "-",
-               "cup_speed": "m/s", "cup_std": "m/s", "cup_ti": "-", "sonic_speed": "m/s",
-               "sonic_direction": "deg", "sonic_std": "m/s", "sonic_ti": "-", "sonic_w": "m/s",
-               "sonic_w_std": "m/s"}
-
-
-def write_series_report(out, stats: SeriesStatistics, heights, starts, *, start_datetime,
-                        scan: Scan | None = None, metadata: dict | None = None,
-                        plots: bool = True, label: str = "lidar") -> dict:
-    """Write a simulated series' statistics under folder `out`:
-
-    - ``series.sta``: the ``.sta`` (`write_series_sta`), stamped at the end of each record
-      from `start_datetime` (numpy datetime64 of time 0) plus `starts` (s) + 600 s;
-    - ``series_statistics.csv``: every `SeriesStatistics` field per record and height
-      (`record_end` in seconds after `start_datetime`);
-    - ``series_ti.png``: lidar against point TI per height (needs matplotlib; skipped with a
-      note in the returned dict when absent, or with ``plots=False``).
-
-    Returns ``{"sta": path, "csv": path, "plot": path or None, "note": text}``."""
-    from pathlib import Path
-
-    from .io import write_table_csv
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    starts = np.asarray(starts, float)
-    heights = np.asarray(heights, float)
-    t0 = np.datetime64(start_datetime, "s")
-    ends = t0 + np.round((starts + RECORD_LENGTH) * 1000).astype("timedelta64[ms]")
-    sta = write_series_sta(out / "series.sta", stats, heights, ends.astype("datetime64[s]"),
-                           scan=scan)
-    r, h = np.asarray(stats.speed).shape
-    cols = {"record_end": np.repeat(starts + RECORD_LENGTH, h), "height": np.tile(heights, r)}
-    units = {"record_end": f"s after {t0}", "height": "m"}
-    for name, unit in _STAT_UNITS.items():
-        cols[name] = np.asarray(getattr(stats, name), float).reshape(-1)
-        units[name] = unit
-    csv = write_table_csv(out / "series_statistics.csv", cols, units, metadata or {})
-    result = {"sta": sta, "csv": csv, "plot": None, "note": ""}
-    if plots:
-        try:
-            from .plots import plot_series_ti
-
-            result["plot"] = plot_series_ti(heights, stats.ti, stats.cup_ti, stats.sonic_ti,
-                                            out / "series_ti.png", label=label)
-        except ImportError as err:
-            result["note"] = f"no figure: {err}"
-    return result
+__getattr__ = deprecated_getattr(__name__)

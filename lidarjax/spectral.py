@@ -34,180 +34,26 @@ differentiable forward model). Units: wavenumbers in rad/m, ``alphaepsilon`` in
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import special
+
+from ._deprecated import deprecated_getattr
+from .probe import _nodes, probe_transfer
+from .scan import reconstruct
+from .turbulence import box_wavenumbers, mann_tensor
 
 __all__ = [
-    "mann_tensor",
-    "mann_eddy_lifetime",
-    "probe_transfer",
-    "box_wavenumbers",
-    "box_variance",
     "LidarVariance",
     "lidar_variance",
     "lidar_variance_ratio",
     "reconstruction_coefficients",
-    "synthesize_box",
     "LidarGeometry",
     "lidar_geometry",
     "lidar_response",
 ]
-
-
-def mann_eddy_lifetime(kl):
-    """Mann's non-dimensional eddy lifetime ``beta / Gamma = (kL)^(-2/3) /
-    sqrt(2F1(1/3, 17/6; 4/3; -(kL)^-2))`` (exact hypergeometric function)."""
-    kl = np.asarray(kl, dtype=np.float64)
-    safe = np.where(kl > 0, kl, 1.0)
-    out = safe ** (-2.0 / 3.0) / np.sqrt(special.hyp2f1(1.0 / 3.0, 17.0 / 6.0, 4.0 / 3.0, -(safe**-2.0)))
-    return np.where(kl > 0, out, np.inf)
-
-
-def mann_tensor(k, alphaepsilon, length_scale, gamma):
-    """The Mann (1994) spectral velocity tensor ``Phi_ij(k)`` in ``(m/s)^2 m^3`` (variance per
-    unit volume of wavenumber space, so ``sum_k Phi dk`` is a covariance in m^2/s^2) at
-    wavenumbers `k` ``(..., 3)`` in rad/m (box frame: ``x`` downwind, ``y`` to the left,
-    ``z`` up), for ``alphaepsilon`` = ``alpha eps^(2/3)`` (m^(4/3)/s^2), length scale ``L`` (m)
-    and anisotropy ``Gamma``. Returns ``(..., 3, 3)``; zero at ``k = 0``.
-
-    Sheared von Karman tensor (Mann 1994, J. Fluid Mech. 273, eqs. 12-16): the isotropic
-    spectrum ``E(k) = alphaepsilon L^(5/3) (kL)^4 / (1 + (kL)^2)^(17/6)`` at the undistorted
-    wavevector ``k0 = (k1, k2, k3 + beta k1)``, ``beta = Gamma * mann_eddy_lifetime(kL)``. The
-    ``arctan`` of the distortion uses the two-argument form (as hipersim does); on ``k1 = 0``
-    the limit ``zeta1 = -beta``, ``zeta2 = 0`` is taken. With ``Gamma = 0`` it is the isotropic
-    von Karman tensor ``E(k) / (4 pi k^4) (k^2 delta_ij - k_i k_j)``.
-    """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return _mann_tensor(np.asarray(k, dtype=np.float64), float(alphaepsilon), float(length_scale),
-                            float(gamma))
-
-
-def _mann_tensor(k, alphaepsilon, L, gamma):
-    k1, k2, k3 = k[..., 0], k[..., 1], k[..., 2]
-    ksq = k1 * k1 + k2 * k2 + k3 * k3
-    zero = ksq == 0
-    ksq_s = np.where(zero, 1.0, ksq)
-    kmag = np.sqrt(ksq_s)
-    beta = float(gamma) * mann_eddy_lifetime(kmag * L)
-    k30 = k3 + beta * k1
-    k0sq = k1 * k1 + k2 * k2 + k30 * k30
-    kl0 = np.sqrt(k0sq) * L
-    e0 = float(alphaepsilon) * L ** (5.0 / 3.0) * kl0**4 / (1.0 + kl0**2) ** (17.0 / 6.0)
-    khsq = k1 * k1 + k2 * k2
-    kh = np.sqrt(khsq)
-    on_axis = khsq == 0  # k1 = k2 = 0: no distortion term survives
-    khsq_s = np.where(on_axis, 1.0, khsq)
-    kh_s = np.where(on_axis, 1.0, kh)
-    c1 = beta * k1 * k1 * (k0sq - 2 * k30 * k30 + beta * k1 * k30) / (ksq_s * khsq_s)
-    ang = np.arctan2(beta * k1 * kh, k0sq - k30 * k1 * beta)
-    k1z = k1 == 0
-    k1_s = np.where(k1z, 1.0, k1)
-    pref = k2 * k0sq / kh_s**3
-    c2 = pref * ang
-    zeta1 = np.where(k1z, -beta, c1 - (k2 / k1_s) * c2)
-    zeta2 = np.where(k1z, 0.0, (k2 / k1_s) * c1 + c2)
-    zeta1 = np.where(on_axis, 0.0, zeta1)
-    zeta2 = np.where(on_axis, 0.0, zeta2)
-    a = e0 / (4 * np.pi * k0sq**2)
-    p11 = a * (k0sq - k1 * k1 - 2 * k1 * k30 * zeta1 + khsq * zeta1**2)
-    p22 = a * (k0sq - k2 * k2 - 2 * k2 * k30 * zeta2 + khsq * zeta2**2)
-    p33 = e0 / (4 * np.pi * ksq_s**2) * khsq
-    p12 = a * (-k1 * k2 - k1 * k30 * zeta2 - k2 * k30 * zeta1 + khsq * zeta1 * zeta2)
-    b = e0 / (4 * np.pi * k0sq * ksq_s)
-    p13 = b * (-k1 * k30 + khsq * zeta1)
-    p23 = b * (-k2 * k30 + khsq * zeta2)
-    phi = np.stack([np.stack([p11, p12, p13], -1), np.stack([p12, p22, p23], -1),
-                    np.stack([p13, p23, p33], -1)], -2)
-    return np.where(zero[..., None, None], 0.0, phi)
-
-
-def probe_transfer(probe, kappa, focus_range, *, model: str = "weight"):
-    """Fourier transform ``W(kappa) = int phi(o) exp(i kappa o) do`` of a probe's range
-    weighting along the beam (real: the weightings are even), at wavenumbers `kappa` (rad/m,
-    the wavevector's component along the beam) and focus range `focus_range` (m).
-
-    `model`:
-
-    - ``"weight"``: the untruncated weighting, in closed form. `lidarjax.PulsedProbe`: a
-      Gaussian pulse of ``rp = fwhm / (2 sqrt(ln 2))`` convolved with the gate ``Dp``:
-      ``exp(-kappa^2 rp^2 / 4) sinc(kappa Dp / 2)``. `lidarjax.CWProbe`: the Lorentzian of
-      half width ``G``: ``exp(-G |kappa|)``. `lidarjax.PointProbe`: 1.
-    - ``"truncated"``: the weighting truncated to the probe's support and renormalised, as
-      the simulator uses it (dense Gauss-Legendre quadrature of ``probe.weight``).
-    - ``"nodes"``: exactly what the simulator computes, ``sum_q w_q cos(kappa o_q)`` over
-      the probe's quadrature nodes.
-    """
-    from .probe import CWProbe, PointProbe, PulsedProbe
-
-    kappa = np.asarray(kappa, dtype=np.float64)
-    r = float(np.asarray(focus_range, dtype=np.float64))
-    if isinstance(probe, PointProbe):
-        return np.ones_like(kappa)
-    if model == "weight":
-        if isinstance(probe, PulsedProbe):
-            rp = float(probe.pulse_fwhm) / (2 * np.sqrt(np.log(2.0)))
-            dp = float(probe.gate_length)
-            return np.exp(-(kappa * rp) ** 2 / 4) * np.sinc(kappa * dp / (2 * np.pi))
-        if isinstance(probe, CWProbe):
-            g = float(probe.hwhm(r))
-            return np.exp(-g * np.abs(kappa))
-        raise ValueError(f"probe_transfer: no closed form for {type(probe).__name__}; use model='nodes'.")
-    if model == "truncated":
-        x, w = _legendre(2000)
-        half, phi = _truncated_weight(probe, x, np.asarray(r))
-        o = float(half) * x
-        phi = np.asarray(phi, dtype=np.float64) * w
-        phi = phi / phi.sum()
-        return np.cos(np.multiply.outer(kappa, o)) @ phi
-    if model == "nodes":
-        offsets, weights = _nodes(probe, np.asarray(r))
-        o = np.asarray(offsets, np.float64).reshape(-1)
-        wq = np.broadcast_to(np.asarray(weights, np.float64).reshape(-1), o.shape)
-        wq = wq / wq.sum()
-        return np.cos(np.multiply.outer(kappa, o)) @ wq
-    raise ValueError(f"probe_transfer: model must be 'weight', 'truncated' or 'nodes', got {model!r}.")
-
-
-@functools.lru_cache(maxsize=4)
-def _legendre(n):
-    return special.roots_legendre(n)
-
-
-@eqx.filter_jit
-def _truncated_weight(probe, x, r):
-    half = probe.support(r)
-    return half, probe.weight(half * x, r)
-
-
-@eqx.filter_jit
-def _nodes(probe, r):
-    return probe.nodes(jnp.asarray(r))
-
-
-def box_wavenumbers(shape, spacing):
-    """The FFT wavenumbers ``(k1, k2, k3)`` (rad/m) of a periodic box of `shape` nodes and
-    `spacing` metres, and the cell volume ``dk`` of wavenumber space."""
-    shape = tuple(int(n) for n in shape)
-    spacing = np.asarray(spacing, dtype=np.float64)
-    ks = [2 * np.pi * np.fft.fftfreq(n, d) for n, d in zip(shape, spacing, strict=True)]
-    dk = float(np.prod(2 * np.pi / (np.asarray(shape) * spacing)))
-    return ks, dk
-
-
-def box_variance(shape, spacing, alphaepsilon, length_scale, gamma):
-    """The ``(3, 3)`` velocity covariance of a periodic Mann box, ``sum_k Phi(k) dk`` over its
-    wavenumbers (m^2/s^2): the expected variances of an FFT-generated box (no high-frequency
-    compensation)."""
-    (k1, k2, k3), dk = box_wavenumbers(shape, spacing)
-    total = np.zeros((3, 3))
-    for a in k1:
-        kk = np.stack(np.broadcast_arrays(a, k2[:, None], k3[None, :]), -1)
-        total += mann_tensor(kk, alphaepsilon, length_scale, gamma).sum(axis=(0, 1))
-    return total * dk
 
 
 def reconstruction_coefficients(scan) -> np.ndarray:
@@ -220,9 +66,6 @@ def reconstruction_coefficients(scan) -> np.ndarray:
 def _scan_matrices(scan):
     """Beam unit vectors ``(b, 3)`` and reconstruction matrix ``(3, b)`` (one compile per scan
     structure instead of one per eager operation)."""
-    import jax
-
-    from .scan import reconstruct
 
     zeros = jnp.zeros((scan.n_beams,), dtype=scan.azimuths.dtype)
     return scan.directions(), jax.jacfwd(lambda s: reconstruct(scan, s))(zeros)
@@ -505,25 +348,4 @@ def lidar_variance_ratio(scan, probe, height, length_scale, gamma, **kwargs) -> 
     return lidar_variance(scan, probe, height, length_scale, gamma, **kwargs).ratio
 
 
-def synthesize_box(shape, spacing, alphaepsilon, length_scale, gamma, *, seed=0, dtype=None):
-    """A periodic Gaussian Mann box whose spectrum is *exactly* ``Phi(k) dk`` on the box's
-    wavenumbers (the spectral model of `lidar_variance`), as a `lidarjax.scenes.TurbulenceBox`
-    (``periodic=(True, True)``, box frame of `lidarjax.scenes.turbulence`).
-
-    The one generator of such boxes is `lidarjax.turbulence_box.fft_mann_box` (FFT synthesis
-    ``u(x) = Re sum_k sqrt(dk) C(k) xi_k exp(i k . x)`` with Mann's closed-form ``C C^H =
-    Phi`` and independent complex standard normal ``xi_k``); this wraps its array. Unlike
-    hipersim it does not apply Mann's (1998) low-wavenumber cell averaging, so its expected
-    covariances are those of `box_variance` exactly.
-    """
-    import jax.numpy as jnp
-
-    from ._precision import default_float
-    from .scenes.turbulence import TurbulenceBox
-    from .turbulence_box import fft_mann_box
-
-    u = fft_mann_box(shape, spacing, length_scale=length_scale, gamma=gamma,
-                     alphaepsilon=alphaepsilon, seed=seed)
-    dtype = default_float() if dtype is None else dtype
-    return TurbulenceBox(jnp.asarray(u, dtype=dtype), jnp.asarray(spacing, dtype=dtype),
-                         periodic=(True, True))
+__getattr__ = deprecated_getattr(__name__)

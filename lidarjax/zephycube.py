@@ -12,7 +12,7 @@ clockwise from north (``offset`` is ZephyCube's ``theta_offset``; beams North, E
 West of its figures for ``offset = 0``), cone angle ``theta_laser`` from the vertical, then an
 optional vertical beam. Both are read from the table's `beam_vectors`.
 
-- `homogeneous` (section 3.1): the closed-form DBS reconstruction, ``u_m = (V_n - V_s) /
+- `homogeneous_wind` (section 3.1): the closed-form DBS reconstruction, ``u_m = (V_n - V_s) /
   (2 sin theta_laser)`` per beam pair, rotated by the offset: what the ``.sta`` files hold.
 - `scalar_correction` (section 3.2.1): from ``.sta`` values. For each beam pair ``p`` (beams
   0/2 along the offset azimuth, 1/3 along offset + 90) with along-pair ``.sta`` component
@@ -43,22 +43,23 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._deprecated import deprecated_getattr
 from .angles import direction_difference, horizontal_speed, wind_direction
 from .corrections import DEFAULT_RATIO_TOL, safe_ratio
 from .response import ResponseTable
 
 __all__ = [
-    "Wind",
+    "ZephyCubeWind",
     "NormalisedRose",
     "beam_layout",
-    "homogeneous",
+    "homogeneous_wind",
     "normalised_rose",
     "scalar_correction",
     "vector_correction",
 ]
 
 
-class Wind(eqx.Module):
+class ZephyCubeWind(eqx.Module):
     """A horizontal wind per height: `speed` (m/s) and meteorological `direction` (degrees),
     each ``(..., h)``; for ZephyCube the wind on the vertical above the lidar."""
 
@@ -124,7 +125,7 @@ def _dbs(los4, offset, cone):
 
 def _wind(uv):
     vel = jnp.concatenate([uv, jnp.zeros_like(uv[..., :1])], axis=-1)
-    return Wind(horizontal_speed(vel), wind_direction(vel))
+    return ZephyCubeWind(horizontal_speed(vel), wind_direction(vel))
 
 
 def _float(x, dtype=None):
@@ -142,12 +143,12 @@ def _check_los(fname, table, los):
         )
 
 
-def homogeneous(table: ResponseTable, los: Float[ArrayLike, "... h b"]) -> Wind:
+def homogeneous_wind(table: ResponseTable, los: Float[ArrayLike, "... h b"]) -> ZephyCubeWind:
     """No correction (section 3.1): the Windcube's homogeneous-flow reconstruction from raw
     LOS ``(..., h, b)`` (m/s), in the north frame. This is what its ``.sta`` files hold."""
     offset, cone, _ = beam_layout(table)
     los = _float(los, table.dtype)
-    _check_los("homogeneous", table, los)
+    _check_los("homogeneous_wind", table, los)
     return _homogeneous(los, offset, cone)
 
 
@@ -165,7 +166,7 @@ def scalar_correction(
     alpha: Float[ArrayLike, "... h"] | None = None,
     threshold: float = 1.0,
     ratio_tol: float = DEFAULT_RATIO_TOL,
-) -> Wind:
+) -> ZephyCubeWind:
     """ZephyCube's scalar correction (section 3.2.1) of ``.sta`` records to the centre line.
 
     **Arguments:**
@@ -180,7 +181,7 @@ def scalar_correction(
       unit speed-ups ``a`` (``0`` disables the filter).
     - `ratio_tol`: relative tolerance of the CFD ratio denominators (NaN below it).
 
-    **Returns:** the corrected `Wind` on the vertical above the lidar.
+    **Returns:** the corrected `ZephyCubeWind` on the vertical above the lidar.
     """
     offset, cone, _ = beam_layout(table)
     if table.beam_velocity is None:
@@ -243,7 +244,7 @@ def vector_correction(
     *,
     alpha: Float[ArrayLike, "... h"] | None = None,
     ratio_tol: float = DEFAULT_RATIO_TOL,
-) -> Wind:
+) -> ZephyCubeWind:
     """ZephyCube's vector correction (section 3.2.2) of raw beams to the centre line.
 
     **Arguments:**
@@ -254,7 +255,7 @@ def vector_correction(
       default: the homogeneous (uncorrected) direction, as ZephyCube does.
     - `ratio_tol`: relative tolerance of the speed-up denominators (NaN below it).
 
-    **Returns:** the corrected `Wind` on the vertical above the lidar.
+    **Returns:** the corrected `ZephyCubeWind` on the vertical above the lidar.
     """
     offset, cone, _ = beam_layout(table)
     if table.point is None:
@@ -331,3 +332,5 @@ def _normalised(table, dirs):
     speed_up = horizontal_speed(beams) / horizontal_speed(centre)
     return speed_up, direction_difference(beams, centre)
 
+
+__getattr__ = deprecated_getattr(__name__)

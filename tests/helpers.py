@@ -2,12 +2,42 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 RTOL64 = 1e-12
 ATOL64 = 1e-12
+
+#: The test tree, its committed data and the repository root.
+TESTS = Path(__file__).resolve().parent
+DATA = TESTS / "data"
+REPO = TESTS.parent
+
+
+def windcube_folder() -> Path | None:
+    """The real Windcube files (`../shared/data/windcube/`; `LIDARJAX_WINDCUBE_DATA` wins), or
+    None when this checkout has none beside it (main checkout or a worktree one level down)."""
+    env = os.environ.get("LIDARJAX_WINDCUBE_DATA")
+    if env:
+        return Path(env)
+    for base in (REPO.parent, REPO.parent.parent):
+        folder = base / "shared" / "data" / "windcube"
+        if folder.is_dir():
+            return folder
+    return None
+
+
+def windcube_file(name: str) -> Path:
+    """One real Windcube file, or skip the test naming it when the data are absent."""
+    folder = windcube_folder()
+    if folder is None or not (folder / name).is_file():
+        pytest.skip(f"real Windcube data not available ({name})")
+    return folder / name
 
 
 def tree_allclose(a, b, rtol=RTOL64, atol=ATOL64) -> bool:

@@ -16,7 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import lidarjax as lj
-from lidarjax.scenes import heading, hemisphere
+from lidarjax.angles import heading
+from lidarjax.scenes import hemisphere
 
 RADIUS = 20.0
 HEIGHTS = (5.0, 10.0, 20.0, 40.0)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import correct, demo, farm, probes, series, simulate, table
+from . import correct, demo, farm, monitor_points, series, simulate, table
 from . import sensitivity as sensitivity_cmd
 from ._common import (
     OneLineParser,
@@ -21,7 +21,7 @@ from ._common import (
 )
 
 #: The command modules, in the order `--help` lists them.
-COMMANDS = (demo, simulate, table, correct, probes, sensitivity_cmd, series, farm)
+COMMANDS = (demo, simulate, table, correct, monitor_points, sensitivity_cmd, series, farm)
 
 
 def build_parser() -> argparse.ArgumentParser:

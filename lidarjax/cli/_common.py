@@ -21,14 +21,22 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
+import string
+import tempfile
+import threading
 from pathlib import Path
+
+import jax
+
+from .. import scan as scans
+from ..io.seed_output import format_number
+from ..probe import CWProbe, PulsedProbe
 
 SCAN_CHOICES = ("windcube_v1", "windcube_v2", "zephir")
 
 
 def enable_x64(args) -> None:
-    import jax
-
     jax.config.update("jax_enable_x64", bool(args.x64))
 
 
@@ -48,9 +56,6 @@ def install_signal_handlers():
 
     Returns a function that restores the previous handler (the command line calls it on
     the way out, so an in-process caller keeps its own handler)."""
-    import signal
-    import threading
-
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
 
@@ -83,7 +88,6 @@ def setup_compilation_cache(args) -> Path | None:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError:
         return None
-    import jax
 
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
@@ -171,8 +175,6 @@ def _refuse_inputs(out: Path, inputs, option: str) -> None:
 
 
 def _probe_folder(folder: Path, option: str) -> None:
-    import tempfile
-
     if not folder.exists():
         raise FileNotFoundError(f"{option}: output folder not found: {folder}")
     if not folder.is_dir():
@@ -273,8 +275,6 @@ def add_probe_arguments(parser) -> None:
 
 
 def make_probe(args):
-    from ..probe import CWProbe, PulsedProbe
-
     scale = 1.0 if args.probe_scale is None else args.probe_scale
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"--probe-scale must be a finite positive number, got {scale}")
@@ -309,8 +309,6 @@ def vector(text: str) -> tuple[float, float, float]:
 
 
 def make_scan(name: str, cone: float | None, *, tilt_compensation: bool = False):
-    from .. import scan as scans
-
     make = getattr(scans, name)
     if cone is None:
         return make(tilt_compensation=tilt_compensation)
@@ -328,8 +326,6 @@ def field_pattern(pattern: str, beta: str) -> str:
 
     Literal braces are written ``{{`` and ``}}``.
     """
-    import string
-
     try:
         fields = [f for _, f, _, _ in string.Formatter().parse(pattern) if f is not None]
     except ValueError as err:
@@ -346,10 +342,6 @@ def field_pattern(pattern: str, beta: str) -> str:
 
 
 def field_paths(args, betas):
-    from pathlib import Path
-
-    from ..io.seed_output import format_number
-
     if len(betas) > 1 and "{beta}" not in args.field:
         raise ValueError(f"--field {args.field!r} must contain '{{beta}}' to name one CFD run "
                          "per platform rotation (e.g. 'runs/platform_{beta}.npz')")

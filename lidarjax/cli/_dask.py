@@ -4,6 +4,11 @@ each run is read in."""
 from __future__ import annotations
 
 import contextlib
+import inspect
+
+import jax
+
+from .._util import import_optional
 
 
 def add_dask_arguments(parser) -> None:
@@ -18,8 +23,6 @@ def add_dask_arguments(parser) -> None:
 
 
 def _set_x64(flag: bool) -> None:
-    import jax
-
     jax.config.update("jax_enable_x64", bool(flag))
 
 
@@ -30,7 +33,6 @@ def dask_client(args):
     if args.workers is None and args.scheduler is None:
         yield None
         return
-    from ..io._common import import_optional
 
     distributed = import_optional("distributed", "dask", "--workers / --scheduler")
     if args.workers is not None:
@@ -60,8 +62,6 @@ class _RegionLoader:
     reader supports it (a plain class so Dask can ship it)."""
 
     def __init__(self, load, paths, region):
-        import inspect
-
         self.load, self.paths, self.region = load, dict(paths), region
         self.takes_region = "region" in inspect.signature(load).parameters
 

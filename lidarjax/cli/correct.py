@@ -2,6 +2,22 @@
 
 from __future__ import annotations
 
+import sys
+import time
+from pathlib import Path
+
+from ..io import load_table
+from ..workflows.records import (
+    DEFAULT_MIN_AVAILABILITY,
+    check_instrument,
+    correct_records,
+    load_records,
+    quality_summary,
+    table_warnings,
+    tilt_difference,
+    write_corrected_csv,
+    write_corrected_netcdf,
+)
 from ._common import check_output_file, finite_float, positive_float
 
 
@@ -43,23 +59,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    import sys
-    import time
-    from pathlib import Path
-
-    from ..io import load_table
-    from ..records import (
-        DEFAULT_MIN_AVAILABILITY,
-        check_instrument,
-        correct_records,
-        load_records,
-        quality_summary,
-        table_warnings,
-        tilt_difference,
-        write_corrected_csv,
-        write_corrected_netcdf,
-    )
-
     def say(text):
         print(f"lidarjax correct: {text}", file=sys.stderr)
 

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
+from ..workflows.demo import run_demo
+
 
 def register(sub) -> None:
     demo = sub.add_parser(
@@ -18,11 +23,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    import json
-    from pathlib import Path
-
-    from ..demo import run_demo
-
     out = Path(args.out)
     print("lidarjax demo: Windcube V1, V2 (pulsed probe) and ZephIR (CW probe) on a "
           "hemispherical platform\n(H = 20 m, lidar 0.5 m above the deck, seed free stream "

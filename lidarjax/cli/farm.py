@@ -14,7 +14,7 @@ every direction, and writes to ``--out``:
 - ``sectors.csv``: each turbine's bearing, distance and excluded width; the merged sectors;
 - ``probes.csv``, ``lidarProbes`` (OpenFOAM ``probes`` dictionary), ``lidarProbes_zcfd.py``
   (zCFD ``turb_probe``, seed 004): the lidar's sample points at ``--map-direction`` (named
-  ``lidar_h<height>_beam<b>_q<node>``, as `lidarjax probes` writes them) plus each turbine's
+  ``lidar_h<height>_beam<b>_q<node>``, as `lidarjax monitor-points` writes them) plus each turbine's
   hub centre (``<name>_hub``) and seed 004's reference point 1 D upstream at hub height
   (``<name>_ref1D``);
 - ``table.npz``: the response table (for ``lidarjax correct``).
@@ -23,15 +23,39 @@ every direction, and writes to ``--out``:
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import scan as scans
+from .._util import atomic_write_text
+from ..angles import heading
+from ..batch import simulate_rotations
+from ..disturbed_sectors import disturbed_sectors, in_sectors, merge_sectors
+from ..forward import simulate
+from ..io.layout import read_farm
+from ..io.monitor_points import (
+    MonitorPoints,
+    write_monitor_points_csv,
+    write_openfoam_probes,
+    write_zcfd_probes,
+)
+from ..io.tables import save_table
+from ..mount import Mount
+from ..plots import plot_farm_map, plot_roses
+from ..probe import CWProbe, PulsedProbe
+from ..response import ResponseTable
+from ..scenes.farm import nacelle_mount
+from ..workflows.monitor_points import monitor_points
 from ._common import finite_float, positive_float
 
 SCANS = ("windcube_v1", "windcube_v2", "zephir", "nacelle_2beam", "nacelle_4beam")
 
 
 def _directions(text: str):
-    import numpy as np
-
     try:
         parts = [float(p) for p in text.split(":")]
     except ValueError:
@@ -101,8 +125,6 @@ def register(sub) -> None:
 
 
 def _check_lidar(lay, xyz) -> None:
-    import numpy as np
-
     d = np.hypot(lay.easting - xyz[0], lay.northing - xyz[1])
     r = 0.5 * lay.diameter
     inside = (d < r) & (xyz[2] > lay.hub_height - r - 1e-9) & (xyz[2] < lay.hub_height + r)
@@ -121,28 +143,6 @@ def _check_lidar(lay, xyz) -> None:
 
 
 def run(args) -> int:
-    from pathlib import Path
-
-    import equinox as eqx
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
-    from .. import scan as scans
-    from ..batch import simulate_sectors
-    from ..forward import simulate
-    from ..io._common import atomic_write_text
-    from ..io.layout import read_farm
-    from ..io.probes import write_openfoam_probes, write_probe_csv, write_zcfd_probes
-    from ..io.tables import save_table
-    from ..mount import Mount
-    from ..plots import plot_farm_map, plot_roses
-    from ..probe import CWProbe, PulsedProbe
-    from ..response import ResponseTable
-    from ..scenes.analytic import heading
-    from ..scenes.farm import nacelle_mount
-    from ..sectors import disturbed_sectors, in_sectors, merge_sectors
-
     lay = read_farm(args.layouts, args.turbine)
     names = list(lay.names)
     out = Path(args.out)
@@ -207,7 +207,7 @@ def run(args) -> int:
     mounts = jax.vmap(lambda f: nacelle_mount(f, k_nac, backward=args.backward, north=True))(stacked) \
         if nacelle else ground
     u_refs = args.speed * np.stack([np.asarray(heading(d)) for d in run_dirs])
-    sims_all = simulate_sectors(stacked, scan, mounts, hts, u_refs=u_refs, probe=probe,
+    sims_all = simulate_rotations(stacked, scan, mounts, hts, u_refs=u_refs, probe=probe,
                                 point_reference=False)
     sims = jax.tree_util.tree_map(lambda a: a[: dirs.size], sims_all)
     grad_yaw = np.asarray(jax.jit(jax.vmap(jax.grad(reading, argnums=1), in_axes=(0, None)))(
@@ -283,7 +283,7 @@ def run(args) -> int:
     meta = {"direction_deg": map_dir, "rows": "lidar beam points (quadrature nodes with "
             "--probe pulsed/cw), then turbine hub centres and seed 004 reference points 1 D "
             "upstream at hub height (beam/node -3)"}
-    write_probe_csv(out / "probes.csv", locs, metadata=meta)
+    write_monitor_points_csv(out / "probes.csv", locs, metadata=meta)
     write_openfoam_probes(out / "lidarProbes", locs, metadata=meta)
     write_zcfd_probes(out / "lidarProbes_zcfd.py", locs, metadata=meta)
     if dirs.size >= 3:
@@ -299,17 +299,14 @@ def run(args) -> int:
 
 
 def farm_probe_locations(names, hub, ref, hub_height, scan, mount, heights, probe):
-    """The lidar's probe points (`lidarjax.probe_locations`, label ``lidar``) followed by each
-    turbine's hub centre and reference point (absolute CFD metres) as one `ProbeLocations`;
+    """The lidar's probe points (`lidarjax.monitor_points`, label ``lidar``) followed by each
+    turbine's hub centre and reference point (absolute CFD metres) as one `MonitorPoints`;
     turbine rows have ``beam = node = -3``, NaN beta and weight, height = hub height."""
-    import numpy as np
 
-    from ..cfd_probes import ProbeLocations, probe_locations
-
-    lidar = probe_locations(scan, mount, np.asarray(heights, np.float64), probe,
+    lidar = monitor_points(scan, mount, np.asarray(heights, np.float64), probe,
                             labels=["lidar"])
     n = 2 * len(names)
-    turbines = ProbeLocations(
+    turbines = MonitorPoints(
         names=tuple(f"{x}_hub" for x in names) + tuple(f"{x}_ref1D" for x in names),
         mount=("turbines",) * n, points=np.concatenate([hub, ref]),
         beta=np.full(n, np.nan), height=np.tile(np.asarray(hub_height, np.float64), 2),
@@ -317,4 +314,4 @@ def farm_probe_locations(names, hub, ref, hub_height, scan, mount, heights, prob
     both = {f: (getattr(lidar, f) + getattr(turbines, f)) if f in ("names", "mount")
             else np.concatenate([getattr(lidar, f), getattr(turbines, f)])
             for f in ("names", "mount", "points", "beta", "height", "beam", "node", "weight")}
-    return ProbeLocations(**both)
+    return MonitorPoints(**both)

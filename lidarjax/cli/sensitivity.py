@@ -5,8 +5,18 @@ from __future__ import annotations
 
 import argparse
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
+from .._util import have_module
+from ..io import read_settings, write_table_csv
+from ..io.fields import load_field
+from ..io.seed_output import format_number
+from ..mount import Mount
+from ..plots import plot_budget, plot_sensitivity_profiles
+from ..scan import windcube_v1, windcube_v2, zephir
+from ..sensitivity import INPUTS, OUTPUTS, budget_columns, uncertainty
 from ._common import (
     add_run_arguments,
     field_paths,
@@ -60,7 +70,6 @@ def register(sub) -> None:
 def parse_std(items) -> dict:
     """``["epsilon=0.5", "location=0.05,0.05,0.1"]`` -> ``{"epsilon": 0.5, "location":
     (0.05, 0.05, 0.1)}``; raises `ValueError` (one line) for anything else."""
-    from ..sensitivity import INPUTS
 
     if not items:
         raise ValueError("give at least one --std NAME=VALUE (e.g. --std epsilon=0.5)")
@@ -90,17 +99,6 @@ def parse_std(items) -> dict:
 
 
 def run(args) -> int:
-    import jax
-    import jax.numpy as jnp
-
-    from ..io import read_settings, write_table_csv
-    from ..io._common import have_module
-    from ..io.fields import load_field
-    from ..io.seed_output import format_number
-    from ..mount import Mount
-    from ..scan import windcube_v1, windcube_v2, zephir
-    from ..sensitivity import OUTPUTS, budget_columns, uncertainty
-
     std = parse_std(args.std)
     outputs = tuple(o.strip() for o in args.outputs.split(",") if o.strip())
     bad = [o for o in outputs if o not in OUTPUTS or o in ("los", "lidar_velocity", "inv_speed",
@@ -152,8 +150,6 @@ def run(args) -> int:
         cols, units = budget_columns(budget, o, betas, z_over_h)
         written.append(write_table_csv(out / f"budget_{o}.csv", cols, units, meta))
     if not args.no_plots and have_module("matplotlib"):
-        from ..plots import plot_budget, plot_sensitivity_profiles
-
         # the budget figure of the platform rotation with the largest uncertainty
         k = int(np.nanargmax(np.nanmax(budget.std[outputs[0]], axis=-1)))
         written.append(plot_budget(

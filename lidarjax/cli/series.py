@@ -4,11 +4,27 @@ mean flow -> a simulated ``.sta``, the statistics as CSV and lidar against point
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
+import jax.numpy as jnp
+import numpy as np
+
+from .. import scan as scans
+from ..angles import horizontal_speed, wind_direction
+from ..io import read_hawc2_box, read_motion_csv, read_settings, read_turbsim
+from ..io.fields import load_field
+from ..mount import Mount
+from ..scenes import FrozenTurbulence, uniform
+from ..series import RECORD_LENGTH, probe_for_field, simulate_statistics
+from ..timing import schedule_for
+from ..turbulence import TurbulenceBox, fft_mann_box, mann_box
+from ..workflows.series_report import write_series_report
 from ._common import (
     SCAN_CHOICES,
     add_probe_arguments,
     finite_float,
+    make_probe,
+    make_scan,
     positive_float,
     positive_int,
     vector,
@@ -93,15 +109,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from pathlib import Path
-
-    import numpy as np
-
-    from ..io import read_settings
-    from ..series import RECORD_LENGTH, probe_for_field, simulate_statistics, write_series_report
-    from ..timing import schedule_for
-    from ._common import make_probe, make_scan
-
     settings = read_settings(args.settings)
     beta = float(settings.beta if args.beta is None else args.beta)
     location = settings.location(beta)
@@ -117,8 +124,6 @@ def run(args) -> int:
         raise ValueError(f"--ti must be positive, got {args.ti}")
     scan = make_scan(args.scan, args.cone_angle)
     if args.tilt_compensation:
-        from .. import scan as scans
-
         make = getattr(scans, args.scan)
         scan = (make(tilt_compensation=True) if args.cone_angle is None
                 else make(args.cone_angle, tilt_compensation=True))
@@ -127,14 +132,11 @@ def run(args) -> int:
     probe = make_probe(args)
     schedule = schedule_for(scan, seconds_per_los=args.seconds_per_los)
     field, info = build_field(args, settings, beta, location, heights)
-    from ..mount import Mount
 
     mount = Mount(location, beta=beta, gamma=settings.gamma, psi=settings.psi,
                   epsilon=settings.epsilon)
     motion = None
     if args.motion:
-        from ..io import read_motion_csv
-
         motion = read_motion_csv(args.motion)
     starts = np.arange(n_rec) * RECORD_LENGTH
     if args.probe_nodes is None and probe is not None:  # explicit --probe-nodes kept as given
@@ -164,19 +166,12 @@ def run(args) -> int:
 
 def build_field(args, settings, beta, location, heights):
     """The frozen-turbulence field of the arguments and a one-line description."""
-    import jax.numpy as jnp
-    import numpy as np
-
-    from ..angles import horizontal_speed, wind_direction
-    from ..scenes import FrozenTurbulence, TurbulenceBox, uniform
 
     if args.field == "uniform":
         if args.speed is None or args.direction is None:
             raise ValueError("--field uniform needs --speed and --direction")
         mean = uniform(args.speed, args.direction)
     else:
-        from ..io.fields import load_field
-
         mean = load_field(args.field)
     origin = np.asarray(mean.origin, np.float64) + np.asarray(mean.origin_lo, np.float64)
     anchor = np.asarray(location, np.float64) - origin
@@ -194,14 +189,10 @@ def build_field(args, settings, beta, location, heights):
     if args.generate_box is not None:
         sigma = args.ti * speed
         if args.generator == "hipersim":
-            from ..scenes import mann_box
-
             box = mann_box(1.0, args.length_scale, args.gamma, args.generate_box, spacing,
                            seed=args.seed, periodic=True)
             box = box.scaled(sigma / float(jnp.std(box.velocity[..., 0])))
         else:
-            from ..turbulence_box import fft_mann_box
-
             vel = fft_mann_box(args.generate_box, spacing, length_scale=args.length_scale,
                                gamma=args.gamma, sigma_u=sigma, seed=args.seed)
             box = TurbulenceBox(jnp.asarray(vel, mean.dtype), jnp.asarray(spacing, mean.dtype),
@@ -209,8 +200,6 @@ def build_field(args, settings, beta, location, heights):
         info = (f"generated Mann box {args.generate_box} x {spacing} m ({args.generator}, "
                 f"L = {args.length_scale:g} m, Gamma = {args.gamma:g}, sigma_u = {sigma:.3g} m/s)")
     else:
-        from ..io import read_hawc2_box, read_turbsim
-
         parts = args.box.split(",")
         if len(parts) == 1:
             box = read_turbsim(parts[0]).box(speed)

@@ -4,12 +4,20 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 import numpy as np
 
+from .._util import have_module
+from ..flags import Flag
+from ..io import read_settings, write_netcdf, write_seed_output, write_table_csv
+from ..io.fields import load_field
+from ..io.seed_output import SEED_UNITS, format_number, seed_output_filename
+from ..workflows.seed_tables import seed_columns, simulate_settings
 from ._common import (
     add_run_arguments,
     add_tilt_arguments,
+    check_output_folder,
     field_paths,
     finite_float,
     make_probe,
@@ -41,7 +49,6 @@ def register(sub) -> None:
 
 def nan_reasons(sims, fields, settings, paths) -> str | None:
     """One line explaining why values are NaN (decoding `lidarjax.Flag`), or None."""
-    from ..flags import Flag
 
     lidar = np.concatenate([np.asarray(s.lidar_velocity)[..., 0].ravel() for s in sims.values()])
     n_nan = int(np.count_nonzero(~np.isfinite(lidar)))
@@ -81,13 +88,6 @@ def nan_reasons(sims, fields, settings, paths) -> str | None:
 
 
 def run(args) -> int:
-    from ..io import read_settings
-    from ..io._common import have_module
-    from ..io.fields import load_field
-    from ..io.seed_output import format_number, seed_output_filename
-    from ..workflow import simulate_settings
-    from ._common import check_output_folder
-
     settings = read_settings(args.settings)
     betas = selected_betas(args, settings)
     for b in betas:
@@ -122,14 +122,7 @@ def run(args) -> int:
 def write_results(args, settings, sims, sources) -> None:
     """Write the seed files (with the `lidarjax.Flag` bits as a 22nd column), CSV and (with
     xarray) NetCDF tables of `sims` ({beta: Simulation}) to ``args.out``; `sources` names each
-    beta's CFD data in the metadata. Shared with `lidarjax probes --sampled`."""
-    from pathlib import Path
-
-    from ..flags import Flag
-    from ..io import write_netcdf, write_seed_output, write_table_csv
-    from ..io._common import have_module
-    from ..io.seed_output import SEED_UNITS, format_number
-    from ..workflow import seed_columns
+    beta's CFD data in the metadata. Shared with `lidarjax monitor-points --sampled`."""
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -2,6 +2,18 @@
 
 from __future__ import annotations
 
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..io import read_settings, save_table
+from ..io.fields import check_field_file, load_field
+from ..workflows.records import check_instrument, load_records
+from ..workflows.seed_tables import build_table, table_region
 from ._common import (
     add_run_arguments,
     add_tilt_arguments,
@@ -45,9 +57,6 @@ def register(sub) -> None:
 
 def _tilt_from(args, rec) -> None:
     """Set ``args.pitch`` / ``args.roll`` from a record header (`--tilt-from-records`)."""
-    import math
-    import sys
-
     got = {k: float(getattr(rec, k, math.nan)) for k in ("pitch", "roll")}
     missing = [k for k, v in got.items() if not math.isfinite(v)]
     if missing:
@@ -59,10 +68,6 @@ def _tilt_from(args, rec) -> None:
 
 
 def _record_heights(path):
-    from pathlib import Path
-
-    from ..records import load_records
-
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"--heights-from: record file not found: {p}")
@@ -74,11 +79,6 @@ def _record_heights(path):
 
 def table_metadata(args, settings, scan, paths, heights) -> dict:
     """The instrument facts `correct` checks, plus the CFD source."""
-    import os
-
-    import numpy as np
-
-    from .. import __version__
 
     return {
         "scan": args.scan, "scan_method": scan.method,
@@ -100,15 +100,6 @@ def table_metadata(args, settings, scan, paths, heights) -> dict:
 
 
 def run(args) -> int:
-    import sys
-
-    import numpy as np
-
-    from ..io import read_settings, save_table
-    from ..io.fields import check_field_file, load_field
-    from ..records import check_instrument
-    from ..workflow import build_table, table_region
-
     settings = read_settings(args.settings)
     betas = [float(b) for b in settings.betas]
     paths = field_paths(args, betas)

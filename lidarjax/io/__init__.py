@@ -4,23 +4,28 @@
 - `seed_output`: the seed's output table, its azimuth convention, CSV and NetCDF writers.
 - `sta`, `rtd`: Windcube 10-minute statistics and line-of-sight records.
 - `zephir`: ZephIR 10-minute CSV exports.
-- `probes`: CFD probe files (OpenFOAM probes dictionary and output, zCFD, CSV).
+- `monitor_points`: the lidar's sample points as CFD monitor points (`MonitorPoints`) and their
+  files (OpenFOAM ``probes`` dictionary and output, zCFD, CSV).
 - `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII, OpenFOAM cases) for
   `lidarjax.GridField`.
 - `openfoam`: OpenFOAM case directories (mesh + `U`, ASCII/binary/gzip) and OpenFOAM's own
   cellPoint interpolation at arbitrary points (`sample_openfoam`).
-- `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII) for `lidarjax.GridField`.
-- `layout`: wind-farm layouts (seed 004's `<name> <easting> <northing>`), turbine types,
-  probe-point CSVs.
+- `vtk`: VTK unstructured meshes (`.vtu`, `.vtk`, `.vtm`; extra ``meshio``).
+- `layout`: wind-farm layouts (seed 004's `<name> <easting> <northing>`), turbine types.
+- `turbulence`: turbulence boxes (HAWC2 binary, TurbSim `.bts`).
+- `motion`: platform motion logs.
+- `tables`: response tables (`save_table`, `load_table`).
+
+The io layer sits above the core and the scenes: readers build core objects (a `GridField`,
+a `ResponseTable`, a `TurbulenceBox`), the core never imports io. Record flags are
+`lidarjax.RecordFlag`.
 
 Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/write),
 `progress` (tqdm progress bars). Each raises an `ImportError` naming the extra when used
 without it.
 """
 
-from ._common import BLOCKING_FLAGS as BLOCKING_FLAGS
-from ._common import MIN_AVAILABILITY as MIN_AVAILABILITY
-from ._common import RecordFlag as RecordFlag
+from .._deprecated import deprecated_getattr
 from .fields import FieldArrays as FieldArrays
 from .fields import FieldLoadReport as FieldLoadReport
 from .fields import load_field as load_field
@@ -33,6 +38,14 @@ from .layout import FarmLayout as FarmLayout
 from .layout import read_farm as read_farm
 from .layout import read_layout as read_layout
 from .layout import read_turbine_type as read_turbine_type
+from .monitor_points import MonitorPoints as MonitorPoints
+from .monitor_points import OpenFoamProbes as OpenFoamProbes
+from .monitor_points import read_monitor_points_csv as read_monitor_points_csv
+from .monitor_points import read_monitor_values_csv as read_monitor_values_csv
+from .monitor_points import read_openfoam_probes as read_openfoam_probes
+from .monitor_points import write_monitor_points_csv as write_monitor_points_csv
+from .monitor_points import write_openfoam_probes as write_openfoam_probes
+from .monitor_points import write_zcfd_probes as write_zcfd_probes
 from .motion import read_motion_csv as read_motion_csv
 from .openfoam import OpenFOAMField as OpenFOAMField
 from .openfoam import is_openfoam_case as is_openfoam_case
@@ -41,13 +54,6 @@ from .openfoam import read_openfoam_field as read_openfoam_field
 from .openfoam import read_openfoam_mesh as read_openfoam_mesh
 from .openfoam import resample_openfoam as resample_openfoam
 from .openfoam import sample_openfoam as sample_openfoam
-from .probes import OpenFoamProbes as OpenFoamProbes
-from .probes import read_openfoam_probes as read_openfoam_probes
-from .probes import read_probe_csv as read_probe_csv
-from .probes import read_probe_values_csv as read_probe_values_csv
-from .probes import write_openfoam_probes as write_openfoam_probes
-from .probes import write_probe_csv as write_probe_csv
-from .probes import write_zcfd_probes as write_zcfd_probes
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
 from .rtd import InstrumentReconstruction as InstrumentReconstruction
 from .rtd import RtdBeams as RtdBeams
@@ -61,7 +67,6 @@ from .seed_output import CsvTable as CsvTable
 from .seed_output import meteorological_from_seed as meteorological_from_seed
 from .seed_output import read_seed_output as read_seed_output
 from .seed_output import read_table_csv as read_table_csv
-from .seed_output import seed_azimuth as seed_azimuth
 from .seed_output import seed_from_meteorological as seed_from_meteorological
 from .seed_output import seed_output_filename as seed_output_filename
 from .seed_output import write_netcdf as write_netcdf
@@ -73,6 +78,7 @@ from .settings import write_settings as write_settings
 from .sta import STA_FIELDS as STA_FIELDS
 from .sta import StaRecord as StaRecord
 from .sta import read_sta as read_sta
+from .sta import write_series_sta as write_series_sta
 from .sta import write_sta as write_sta
 from .tables import load_table as load_table
 from .tables import save_table as save_table
@@ -83,3 +89,5 @@ from .turbulence import write_hawc2_box as write_hawc2_box
 from .turbulence import write_turbsim as write_turbsim
 from .zephir import ZephirRecord as ZephirRecord
 from .zephir import read_zephir_csv as read_zephir_csv
+
+__getattr__ = deprecated_getattr(__name__)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from ._common import file_error
+from .._util import file_error
 
 __all__: list[str] = []
 

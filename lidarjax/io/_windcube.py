@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
+import io
 import re
 import warnings
 from collections.abc import Callable, Mapping
@@ -36,18 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import (
-    RecordFlag,
-    file_error,
-    normalise_key,
-    offset_timedelta,
-    parse_float,
-    parse_times,
-    parse_utc_offset,
-    read_text,
-    require_file,
-    summarise_lines,
-)
+from .._util import file_error, normalise_key, require_file, summarise_lines
+from ..flags import RecordFlag
+from ._common import offset_timedelta, parse_float, parse_times, parse_utc_offset, read_text
 
 __all__: list[str] = []
 
@@ -206,7 +198,6 @@ def _pandas_block(lines: list[str], cols: list[int]) -> np.ndarray | None:
         import pandas as pd
     except ImportError:
         return None
-    import io
 
     out = np.empty((len(lines), len(cols)))
     step = 50_000  # bounded memory: one block of text at a time

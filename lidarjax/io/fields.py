@@ -39,8 +39,9 @@ from typing import Any
 
 import numpy as np
 from jaxtyping import Float
+from scipy.spatial import Delaunay, QhullError
 
-from ._common import (
+from .._util import (
     PathLike,
     atomic_path,
     file_error,
@@ -50,6 +51,9 @@ from ._common import (
     normalise_key,
     require_file,
 )
+from ..field import GridField
+from .openfoam import is_openfoam_case, read_openfoam_field, resample_openfoam
+from .vtk import read_vtk_field
 
 __all__ = [
     "FieldArrays",
@@ -524,8 +528,6 @@ def resample_to_grid(
     outside the hull, and `report.notes` says how many simplices and grid nodes were
     masked as bridging a gap.
     """
-    from scipy.spatial import Delaunay, QhullError
-
     pts = np.asarray(points, dtype=np.float64)
     vals = np.asarray(values, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3 or vals.shape != pts.shape:
@@ -614,7 +616,6 @@ def _format_of(path: Path, fmt: str | None) -> str:
             raise ValueError(f"format must be 'npz', 'netcdf' or 'fluent', or 'openfoam' for a case directory, "
                              f"or 'vtk' for .vtu/.vtk/.vtm; got {fmt!r}")
         return fmt
-    from .openfoam import is_openfoam_case
 
     if path.is_dir() or is_openfoam_case(path):
         return "openfoam"
@@ -735,7 +736,6 @@ def load_field(
     convex hull of scattered Fluent data, or an OpenFOAM grid's spacing and resampling
     error).
     """
-    from ..field import GridField
 
     arrays = read_field_arrays(
         path, spacing=spacing, shape=shape, progress=progress, format=format, region=region,
@@ -777,10 +777,8 @@ def _crop_arrays(arrays: FieldArrays, region: Any) -> FieldArrays:
 
 def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any, vtk: bool = False
                           ) -> FieldArrays:
-    from .openfoam import read_openfoam_field, resample_openfoam
 
     if vtk:  # VTK unstructured grids: the same cellPoint sampling (lidarjax.io.vtk)
-        from .vtk import read_vtk_field
 
         of = read_vtk_field(path)
     else:

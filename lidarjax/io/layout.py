@@ -18,7 +18,7 @@ Each layout file is paired with one turbine type (`read_farm`): the zCFD utility
 
 **Probe points** (seed 004's generated monitor probes): `lidarjax farm` writes each turbine's
 hub centre and reference point (one rotor diameter upstream at hub height,
-`WindFarm.reference_points`) with the lidar's sample points through `lidarjax.io.probes`
+`WindFarm.reference_points`) with the lidar's sample points through `lidarjax.io.monitor_points`
 (OpenFOAM ``probes`` dictionary, zCFD ``turb_probe`` file, CSV).
 """
 
@@ -32,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import PathLike, file_error, normalise_key, require_file
+from .._util import PathLike, file_error, normalise_key, require_file
+from ..scenes.farm import wind_farm
 
 __all__ = ["Layout", "TurbineType", "FarmLayout", "read_layout", "read_turbine_type",
            "read_farm", "check_spacing"]
@@ -85,7 +86,6 @@ class FarmLayout:
     def to_farm(self, **kwargs):
         """A `lidarjax.scenes.WindFarm` of these turbines; `kwargs` go to `wind_farm`
         (speed, direction, model, ...)."""
-        from ..scenes.farm import wind_farm
 
         return wind_farm(self.easting, self.northing, self.hub_height, self.diameter,
                          ct=self.curves, **kwargs)

@@ -14,7 +14,8 @@ import re
 
 import numpy as np
 
-from ._common import PathLike, file_error, require_file
+from .._util import PathLike, file_error, require_file
+from ..motion import SampledMotion
 
 __all__ = ["read_motion_csv"]
 
@@ -26,7 +27,6 @@ def read_motion_csv(path: PathLike):
 
     Raises `ValueError` naming the file (and line) for a missing ``time`` column, unknown
     columns, non-numeric cells or times that do not increase."""
-    from ..motion import SampledMotion
 
     p = require_file(path, "motion CSV")
     lines = p.read_text(encoding="utf-8-sig").splitlines()

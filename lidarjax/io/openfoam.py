@@ -33,9 +33,10 @@ from typing import Any
 
 import numpy as np
 from jaxtyping import Float
+from scipy.interpolate import RegularGridInterpolator
 
+from .._util import PathLike, file_error
 from ._cells import BoundaryValues, CellPointSampler, PolyMesh, build_sampler, cell_bounds
-from ._common import PathLike, file_error
 from ._foamfile import Cursor, open_file, resolve_file
 
 __all__ = [
@@ -497,8 +498,6 @@ def resample_openfoam(
     info["spacing_max"] = tuple(float(s.max()) for s in steps)
     # resampling error: trilinear on the grid against cellPoint at random points
     if check_points > 0:
-        from scipy.interpolate import RegularGridInterpolator
-
         rng = np.random.default_rng(seed)
         q = lo + (hi - lo) * rng.random((check_points, 3))
         exact = sampler.sample_points(q)

@@ -36,15 +36,8 @@ from typing import Any
 import numpy as np
 from jaxtyping import Bool, Float, Int, Shaped
 
-from ._common import (
-    MIN_AVAILABILITY,
-    PathLike,
-    RecordFlag,
-    file_error,
-    freeze,
-    import_optional,
-    normalise_key,
-)
+from .._util import PathLike, file_error, freeze, import_optional, normalise_key
+from ..flags import MIN_AVAILABILITY, RecordFlag
 from ._windcube import header_facts, read_windcube, report, scalar_arrays, to_utc
 
 __all__ = ["BEAM_AZIMUTHS", "InstrumentReconstruction", "RtdBeams", "RtdRecord", "group_rtd",
@@ -530,7 +523,7 @@ def instrument_reconstruction(
     """Reproduce the Windcube's per-line `Wind Speed`, `Wind Direction`, `X/Y/Z-wind`.
 
     Algorithm (found by fitting the real V2.1 file; it reproduces every printed value to
-    the rounding of the printed radial speeds, see `tests/io/test_io_rtd_real.py`): at each
+    the rounding of the printed radial speeds, see `tests/io/test_rtd_real.py`): at each
     line of sight, take the **latest** radial speed of each beam (a sliding window over the
     last 0/90/180/270 tilted beams and the last vertical beam, **no CNR filter**, no
     pitch/roll correction), with `s = sin(cone_angle)`:

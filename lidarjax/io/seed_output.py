@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 from jaxtyping import Float
 
-from ._common import (
+from .._util import (
     PathLike,
     atomic_path,
     atomic_write_text,
@@ -74,7 +74,6 @@ __all__ = [
     "meteorological_from_seed",
     "read_seed_output",
     "read_table_csv",
-    "seed_azimuth",
     "seed_from_meteorological",
     "seed_output_filename",
     "write_netcdf",
@@ -139,7 +138,7 @@ def _wrap360(deg: np.ndarray) -> np.ndarray:
     return np.where(out >= 360.0, out - 360.0, out)
 
 
-def seed_azimuth(
+def _seed_azimuth_uv(
     u: Float[np.ndarray, "*shape"] | float, v: Float[np.ndarray, "*shape"] | float
 ) -> Float[np.ndarray, "*shape"]:
     """Seed flow azimuth in degrees: `(-atan2(v, u)) mod 360`, in [0, 360).
@@ -237,7 +236,7 @@ def write_seed_output(
     - `directory`: where to write (created if missing).
     - `beta`: platform rotation, degrees; names the file (`seed_output_filename`).
     - `columns`: a mapping from each of the 21 `SEED_COLUMNS` to a 1-D array of length
-      `nh`. Angles in the seed azimuth convention (`seed_azimuth`). Missing or unknown
+      `nh`. Angles in the seed azimuth convention (`lidarjax.seed_azimuth`). Missing or unknown
       names raise `ValueError`.
     - `verbose`: 1 (or `True`) writes the header line of column names; 0 writes none.
     - `flags`: optional `(nh,)` integer `lidarjax.Flag` bits per height, written as a 22nd

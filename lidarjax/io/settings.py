@@ -52,14 +52,7 @@ from pathlib import Path
 import numpy as np
 from jaxtyping import Float
 
-from ._common import (
-    PathLike,
-    atomic_write_text,
-    file_error,
-    format_number,
-    freeze,
-    require_file,
-)
+from .._util import PathLike, atomic_write_text, file_error, format_number, freeze, require_file
 
 __all__ = [
     "BETA_TOLERANCE_DEG",

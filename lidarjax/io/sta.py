@@ -22,20 +22,16 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from jaxtyping import Bool, Float, Shaped
 
-from ._common import (
-    BLOCKING_FLAGS,
-    MIN_AVAILABILITY,
-    PathLike,
-    RecordFlag,
-    freeze,
-    import_optional,
-    normalise_key,
-)
+from .._util import PathLike, atomic_path, file_error, freeze, import_optional, normalise_key
+from ..flags import BLOCKING_FLAGS, MIN_AVAILABILITY, RecordFlag
+from ..scan import Scan
+from ..series import SeriesStatistics
 from ._windcube import (
     header_facts,
     infer_bad_times,
@@ -46,8 +42,8 @@ from ._windcube import (
     to_utc,
 )
 
-__all__ = ["STA_FIELDS", "STA_GATE_QUANTITIES", "STA_QUANTITIES", "RecordFlag", "StaRecord", "read_sta",
-           "write_sta"]
+__all__ = ["STA_FIELDS", "STA_GATE_QUANTITIES", "STA_QUANTITIES", "StaRecord", "read_sta",
+           "write_sta", "write_series_sta"]
 
 STA_FIELDS: tuple[str, ...] = (
     "speed",
@@ -292,8 +288,6 @@ def read_sta(
     p = parsed.path
     for need in ("speed", "direction"):
         if need not in parsed.quantities:
-            from ._common import file_error
-
             raise file_error(
                 p, parsed.scalar_lines, f"no {need} columns ('40m Wind Speed (m/s)' / "
                 "'40m Wind Direction (°)' in V2, 'Vhm1' / 'Azim1' in V1): is this a "
@@ -405,9 +399,6 @@ def write_sta(
 
     **Returns:** the path written.
     """
-    from pathlib import Path
-
-    from ._common import atomic_path
 
     time = np.asarray(time, dtype="datetime64[s]")
     heights = np.asarray(heights, dtype=np.float64)
@@ -454,3 +445,22 @@ def write_sta(
     with atomic_path(target) as tmp, open(tmp, "x", encoding="cp1252", newline="\n") as fh:
         fh.write("\n".join(lines) + "\n")
     return target
+
+
+def write_series_sta(path, stats: SeriesStatistics, heights, record_ends, *,
+                     scan: Scan | None = None, direction_offset: float = 0.0,
+                     system: str = "lidarjax simulated series"):
+    """Write `SeriesStatistics` ``(r, h)`` as a Windcube ``.sta`` (`lidarjax.io.write_sta`).
+
+    `record_ends`: ``(r,)`` datetime64 (end of each 10-minute interval, as ``.sta`` stamps
+    them). Writes speed, dispersion, min, max, direction, Z-wind, its dispersion and
+    availability. Returns the path written."""
+    return write_sta(path, np.asarray(record_ends, dtype="datetime64[s]"), np.asarray(heights),
+                     np.asarray(stats.speed), np.asarray(stats.direction), w=np.asarray(stats.w),
+                     speed_std=np.asarray(stats.speed_std), availability=np.asarray(stats.availability),
+                     speed_min=np.asarray(stats.speed_min), speed_max=np.asarray(stats.speed_max),
+                     w_std=np.asarray(stats.w_std),
+                     scan_angle=None if scan is None else float(scan.cone_angle),
+                     direction_offset=direction_offset, system=system)
+
+

@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from ._common import PathLike, atomic_path, file_error, require_file
+from .._util import PathLike, atomic_path, file_error, require_file
+from ..response import ResponseTable
 
 __all__ = ["save_table", "load_table", "TABLE_FORMAT"]
 
@@ -49,7 +50,6 @@ def load_table(path: PathLike, *, return_metadata: bool = False):
     ``(table, metadata)`` with `return_metadata=True`. Raises `ValueError` naming the file
     for anything that is not such a table.
     """
-    from ..response import ResponseTable
 
     p = require_file(path, "response table")
     with open(p, "rb") as fh:  # our handle: closed even when numpy gives up half-way

@@ -1,6 +1,6 @@
 """Turbulence boxes: Mann boxes in HAWC2 binary and TurbSim ``.bts`` full-field files.
 
-Both readers return a `lidarjax.scenes.TurbulenceBox` (or, for TurbSim, a `TurbSimField`
+Both readers return a `lidarjax.TurbulenceBox` (or, for TurbSim, a `TurbSimField`
 that holds the full velocities and makes the box): fluctuations on a regular grid in the box
 frame of `lidarjax.scenes.turbulence` (``x`` downwind, ``y`` to the left looking downwind,
 ``z`` up; node ``(i, j, k)`` at ``(i dx, (j - (ny-1)/2) dy, k dz)``), ready for
@@ -36,9 +36,12 @@ import dataclasses
 import struct
 from pathlib import Path
 
+import jax.numpy as jnp
 import numpy as np
 
-from ._common import PathLike, atomic_path, file_error, require_file
+from .._precision import default_float
+from .._util import PathLike, atomic_path, file_error, require_file
+from ..turbulence import TurbulenceBox
 
 __all__ = [
     "read_hawc2_box",
@@ -85,7 +88,7 @@ def read_hawc2_box(
     - `shape`: ``(nx, ny, nz)``, HAWC2's ``box_dim_u/v/w`` point counts.
     - `spacing`: ``(dx, dy, dz)`` in metres (HAWC2's box length divided by the point count).
     - `periodic`: whether the box is periodic laterally and vertically (a Mann box made
-      without doubling is; see `lidarjax.scenes.TurbulenceBox`).
+      without doubling is; see `lidarjax.TurbulenceBox`).
     - `reverse_x`: reverse the ``x`` order (node ``i`` holds plane ``(-i) mod nx``), so that a
       point at the box's ``x = 0`` meets planes ``0, 1, 2, ...`` in time, as HAWC2/OpenFAST
       feed them to a turbine (see the module docs).
@@ -94,10 +97,6 @@ def read_hawc2_box(
     Raises `ValueError` naming the file when its size is not ``4 nx ny nz`` bytes (with the
     point count it does hold), or when it holds NaN or inf.
     """
-    import jax.numpy as jnp
-
-    from .._precision import default_float
-    from ..scenes.turbulence import TurbulenceBox
 
     shape = _shape3(shape, "read_hawc2_box")
     s = _spacing3(spacing, "read_hawc2_box")
@@ -179,10 +178,6 @@ class TurbSimField:
         periodic along ``x``; laterally and vertically it covers the grid only (NaN outside);
         the grid bottom is box ``z = 0`` (place it with ``anchor`` at height `z[0]`).
         """
-        import jax.numpy as jnp
-
-        from .._precision import default_float
-        from ..scenes.turbulence import TurbulenceBox
 
         u = float(self.u_hub if speed is None else speed)
         if not np.isfinite(u) or u <= 0:

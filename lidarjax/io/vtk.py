@@ -39,13 +39,16 @@ the CFD frame; coordinates in metres.
 
 from __future__ import annotations
 
+import base64
 import dataclasses
 import os
 import xml.etree.ElementTree as ET
+import zlib
 from pathlib import Path
 
 import numpy as np
 
+from .._util import PathLike, import_optional
 from ._cells import (
     BoundaryValues,
     CellPointSampler,
@@ -54,7 +57,6 @@ from ._cells import (
     _gather_face_points,
     build_sampler,
 )
-from ._common import PathLike, import_optional
 from .openfoam import OpenFOAMField
 
 __all__ = ["VTK_SUFFIXES", "VTKField", "read_vtk_field"]
@@ -211,9 +213,6 @@ class _VtuReader:
     optionally zlib-compressed) and appended (raw or base64) data arrays."""
 
     def __init__(self, path: Path):
-        import base64
-        import zlib
-
         self.path, self._b64, self._zlib = path, base64, zlib
         data = path.read_bytes()
         self.appended = b""

@@ -42,21 +42,9 @@ from typing import Any
 import numpy as np
 from jaxtyping import Float, Shaped
 
-from ._common import (
-    BLOCKING_FLAGS,
-    PathLike,
-    RecordFlag,
-    file_error,
-    freeze,
-    import_optional,
-    normalise_key,
-    offset_timedelta,
-    parse_times,
-    parse_utc_offset,
-    read_text,
-    require_file,
-    summarise_lines,
-)
+from .._util import PathLike, file_error, freeze, import_optional, normalise_key, require_file, summarise_lines
+from ..flags import BLOCKING_FLAGS, RecordFlag
+from ._common import offset_timedelta, parse_times, parse_utc_offset, read_text
 from ._windcube import infer_bad_times, regular_step
 
 __all__ = ["ZEPHIR_MISSING", "ZephirRecord", "read_zephir_csv"]

@@ -2,9 +2,9 @@
 
 - `lidarjax.scenes.analytic`: the validation flows (uniform, power law, linear, hemisphere,
   hill), all linear in the free stream.
-- `lidarjax.scenes.turbulence`: `FrozenTurbulence`, any mean field plus a `TurbulenceBox`
-  advected with the wind (Taylor), time-dependent through ``sample_local_at``; `mann_box`
-  generates boxes with hipersim (extra ``turbulence``).
+- `lidarjax.scenes.turbulence`: `FrozenTurbulence`, any mean field plus a
+  `lidarjax.TurbulenceBox` advected with the wind (Taylor), time-dependent through
+  ``sample_local_at`` (boxes and their generators: `lidarjax.turbulence`).
 - `lidarjax.scenes.farm`: wind-farm wakes (`WindFarm`: top-hat Jensen or Gaussian wakes,
   yaw deflection, turbine interaction), non-linear in direction.
 
@@ -12,12 +12,12 @@ Every scene is an `AbstractField` (CFD frame: ``+x`` east, ``+y`` north, ``+z`` 
 and m/s; directions meteorological), dynamic and differentiable in all its parameters.
 """
 
+from .._deprecated import deprecated_getattr
 from .analytic import Hemisphere as Hemisphere
 from .analytic import Hill as Hill
 from .analytic import Linear as Linear
 from .analytic import PowerLaw as PowerLaw
 from .analytic import Uniform as Uniform
-from .analytic import heading as heading
 from .analytic import hemisphere as hemisphere
 from .analytic import hill as hill
 from .analytic import linear as linear
@@ -29,6 +29,6 @@ from .farm import nacelle_mount as nacelle_mount
 from .farm import overlap_area as overlap_area
 from .farm import wind_farm as wind_farm
 from .turbulence import FrozenTurbulence as FrozenTurbulence
-from .turbulence import TurbulenceBox as TurbulenceBox
 from .turbulence import frozen_turbulence as frozen_turbulence
-from .turbulence import mann_box as mann_box
+
+__getattr__ = deprecated_getattr(__name__)

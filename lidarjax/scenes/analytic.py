@@ -20,20 +20,15 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._precision import default_float, split
+from ..angles import heading
 from ..field import AbstractField
 
 __all__ = ["Uniform", "PowerLaw", "Linear", "Hemisphere", "Hill",
-           "uniform", "power_law", "linear", "hemisphere", "hill", "heading"]
+           "uniform", "power_law", "linear", "hemisphere", "hill"]
 
 
 def _f(value, dtype):
     return jnp.asarray(value, dtype=dtype)
-
-
-def heading(direction_deg, dtype=None) -> Float[Array, 3]:
-    """Unit horizontal vector the wind blows *towards* for a meteorological direction."""
-    d = jnp.deg2rad(jnp.asarray(direction_deg, dtype=dtype))
-    return jnp.stack([-jnp.sin(d), -jnp.cos(d), jnp.zeros_like(d)])
 
 
 def _dtype(dtype):

@@ -1,6 +1,6 @@
 """Wind farms: engineering wake models as a differentiable scene (`WindFarm`).
 
-A `WindFarm` is an `lidarjax.AbstractField`: `lidarjax.simulate`, `simulate_sectors` and
+A `WindFarm` is an `lidarjax.AbstractField`: `lidarjax.simulate`, `simulate_rotations` and
 `ResponseTable` take it like any scene, and it is jit-, vmap- and grad-able in every number
 (turbine positions, yaw, thrust, free stream). What changes the compiled graph is static:
 the wake `model` (``"top_hat"`` Park/Jensen or ``"gaussian"`` Bastankhah & Porte-Agel 2014),
@@ -21,7 +21,7 @@ so ``x_r`` points downstream and ``y_r`` to the left of the wind seen from above
 rotor's misalignment in degrees, positive anticlockwise seen from above (the rotor faces
 bearing ``direction - yaw``); the rotor pushes the air against its axis, so a positive yaw
 pushes the wake to the right of the wind (``-y_r``). This is FLORIS's sign: with the same
-yaw angles the two agree to round-off (tests/test_farm.py).
+yaw angles the two agree to round-off (tests/scenes/test_farm.py).
 
 **Turbines.** Each turbine ``i`` has a hub at height ``hub_height[i]`` above the datum, a
 rotor diameter ``D_i``, a thrust curve ``Ct_i(U)`` (piecewise linear in the rotor-averaged
@@ -77,7 +77,7 @@ differentiable in every number).
 
 References: N. O. Jensen (1983), Risoe-M-2411; I. Katic et al. (1986), EWEC; M. Bastankhah &
 F. Porte-Agel (2014), Renewable Energy 70; A. Jimenez et al. (2010), Wind Energy 13; P.
-Gebraad et al. (2016), Wind Energy 19; IEC 61400-12-1 Annex A (see `lidarjax.sectors`).
+Gebraad et al. (2016), Wind Energy 19; IEC 61400-12-1 Annex A (see `lidarjax.disturbed_sectors`).
 """
 
 from __future__ import annotations
@@ -92,6 +92,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._precision import default_float, is_concrete, split
 from ..field import AbstractField
+from ..mount import Mount
 
 __all__ = ["WindFarm", "FarmState", "wind_farm", "overlap_area", "to_floris", "nacelle_mount",
            "MODELS", "COMBINATIONS",
@@ -603,7 +604,7 @@ def to_floris(farm: WindFarm, *, turbulence_intensity: float = 0.06):
     """The same farm as a FLORIS (``floris>=4``) model, for validation and benchmarks.
 
     The conventions that map one package onto the other (all verified to round-off by
-    tests/test_farm.py):
+    tests/scenes/test_farm.py):
 
     - coordinates: FLORIS's ``layout_x``/``layout_y`` are `WindFarm.x` / `WindFarm.y` (the
       turbines relative to ``farm.origin``, m, ``x`` east, ``y`` north) and FLORIS ``z`` is
@@ -685,9 +686,6 @@ def nacelle_mount(farm: WindFarm, index: int, *, backward: bool = False, north: 
 
     Dynamic in the farm (direction, yaw): use it inside `jax.vmap` over directions. The
     location is kept exact at UTM coordinates (the farm's origin plus the local hub)."""
-    import equinox as eqx
-
-    from ..mount import Mount
 
     heading = farm.rotor_heading()[index] + (180.0 if backward else 0.0)
     h = jnp.deg2rad(heading)

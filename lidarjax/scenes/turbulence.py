@@ -56,144 +56,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._precision import default_float, is_concrete
+from .._deprecated import deprecated_getattr
+from .._precision import is_concrete
+from ..angles import heading
 from ..field import AbstractField, TimeSampler
 from ..frames import rotate
-from .analytic import heading
+from ..turbulence import TurbulenceBox, box_axis
 
-__all__ = ["TurbulenceBox", "FrozenTurbulence", "frozen_turbulence", "mann_box"]
-
-
-class TurbulenceBox(eqx.Module):
-    """Velocity fluctuations on a regular grid in the box frame (see the module docs).
-
-    **Arguments:**
-
-    - `velocity`: ``(nx, ny, nz, 3)`` fluctuations ``(u', v', w')`` in m/s along the box axes
-      (``x`` downwind, ``y`` to the left looking downwind, ``z`` up). Its floating dtype is the
-      box's working dtype.
-    - `spacing`: ``(dx, dy, dz)`` node spacing in metres, positive.
-    - `periodic`: whether the box is periodic laterally and vertically ``(y, z)`` (static).
-      Along ``x`` it is always periodic. Default ``(False, False)``: outside the nodes gives
-      NaN. FFT boxes generated without doubling (hipersim's ``double_xyz=(False, False,
-      False)``) are periodic in all three directions.
-
-    Raises `ValueError` for a wrong shape, non-finite values or spacings, or fewer than 2 nodes
-    along ``x`` (4 recommended) and 2 along a non-periodic axis.
-    """
-
-    velocity: Float[Array, "nx ny nz 3"]
-    spacing: Float[Array, 3]
-    periodic: tuple[bool, bool] = eqx.field(static=True)
-
-    def __init__(self, velocity, spacing, *, periodic=(False, False)):
-        velocity = jnp.asarray(velocity)
-        if not jnp.issubdtype(velocity.dtype, jnp.floating):
-            velocity = velocity.astype(default_float())
-        if velocity.ndim != 4 or velocity.shape[-1] != 3:
-            raise ValueError(
-                f"TurbulenceBox: velocity must have shape (nx, ny, nz, 3) with (u', v', w') "
-                f"last, got {velocity.shape}."
-            )
-        if isinstance(periodic, bool):
-            periodic = (periodic, periodic)
-        periodic = tuple(bool(p) for p in periodic)
-        if len(periodic) != 2:
-            raise ValueError(f"TurbulenceBox: periodic is (y, z), got {periodic!r}.")
-        nx, ny, nz = velocity.shape[:3]
-        if nx < 2:
-            raise ValueError(f"TurbulenceBox: need at least 2 nodes along x, got {nx}.")
-        for n, name, per in ((ny, "y", periodic[0]), (nz, "z", periodic[1])):
-            if n < (1 if per else 2):
-                raise ValueError(
-                    f"TurbulenceBox: need at least 2 nodes along non-periodic {name}, got {n}."
-                )
-        if is_concrete(velocity) and not bool(jnp.all(jnp.isfinite(velocity))):
-            raise ValueError("TurbulenceBox: velocity contains NaN or inf.")
-        if is_concrete(spacing):
-            s = np.asarray(spacing, dtype=np.float64)
-            if s.shape != (3,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
-                raise ValueError(
-                    f"TurbulenceBox: spacing must be (dx, dy, dz), finite and positive metres; "
-                    f"got {spacing!r}."
-                )
-        self.velocity = velocity
-        self.spacing = jnp.asarray(spacing, dtype=velocity.dtype)
-        self.periodic = periodic
-
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        """``(nx, ny, nz)``."""
-        return tuple(self.velocity.shape[:3])
-
-    @property
-    def dtype(self):
-        return self.velocity.dtype
-
-    @property
-    def length(self) -> Float[Array, ""]:
-        """Period along ``x``, ``nx dx`` (m)."""
-        return self.shape[0] * self.spacing[0]
-
-    def coordinates(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Node coordinates ``(x, y, z)`` in the box frame (m, float64 numpy)."""
-        s = np.asarray(self.spacing, dtype=np.float64)
-        nx, ny, nz = self.shape
-        return (np.arange(nx) * s[0], (np.arange(ny) - (ny - 1) / 2) * s[1], np.arange(nz) * s[2])
-
-    def astype(self, dtype) -> TurbulenceBox:
-        """The same box in another floating dtype."""
-        return TurbulenceBox(self.velocity.astype(dtype), self.spacing.astype(dtype),
-                             periodic=self.periodic)
-
-    def scaled(self, factor) -> TurbulenceBox:
-        """The box with every fluctuation multiplied by `factor` (e.g. to set a TI)."""
-        return eqx.tree_at(lambda b: b.velocity, self, self.velocity * factor)
-
-    def sample_box(
-        self, xi: Float[Array, ...], eta: Float[Array, ...], zeta: Float[Array, ...]
-    ) -> Float[Array, "... 3"]:
-        """Trilinear fluctuations ``(u', v', w')`` (m/s, box axes) at box coordinates (m).
-
-        Periodic along ``x`` (and along ``y``/``z`` where `periodic`); NaN outside a
-        non-periodic axis' nodes, inserted last over a safe stand-in (finite gradients)."""
-        dtype = self.dtype
-        nx, ny, nz = self.shape
-        s = self.spacing
-        ix0, ix1, fx, okx = _axis(xi.astype(dtype) / s[0], nx, True)
-        iy0, iy1, fy, oky = _axis(eta.astype(dtype) / s[1] + (ny - 1) / 2, ny, self.periodic[0])
-        iz0, iz1, fz, okz = _axis(zeta.astype(dtype) / s[2], nz, self.periodic[1])
-        flat = self.velocity.reshape(-1, 3)
-
-        def corner(i, j, k):
-            return flat[(i * ny + j) * nz + k]
-
-        fx, fy, fz = fx[..., None], fy[..., None], fz[..., None]
-        c00 = corner(ix0, iy0, iz0) * (1 - fz) + corner(ix0, iy0, iz1) * fz
-        c01 = corner(ix0, iy1, iz0) * (1 - fz) + corner(ix0, iy1, iz1) * fz
-        c10 = corner(ix1, iy0, iz0) * (1 - fz) + corner(ix1, iy0, iz1) * fz
-        c11 = corner(ix1, iy1, iz0) * (1 - fz) + corner(ix1, iy1, iz1) * fz
-        c0 = c00 * (1 - fy) + c01 * fy
-        c1 = c10 * (1 - fy) + c11 * fy
-        val = c0 * (1 - fx) + c1 * fx
-        ok = okx & oky & okz
-        return jnp.where(ok[..., None], val, jnp.nan)
-
-
-def _axis(s, n: int, periodic: bool):
-    """Lower and upper node indices, fraction and in-domain mask of fractional index `s`."""
-    s = jnp.asarray(s)
-    if periodic:
-        fl = jnp.floor(s)
-        frac = s - fl
-        i0 = jnp.mod(fl.astype(jnp.int32), n)
-        i1 = jnp.where(i0 + 1 == n, 0, i0 + 1)
-        return i0, i1, frac, jnp.isfinite(s)
-    ok = (s >= 0) & (s <= n - 1)
-    safe = jnp.where(ok, s, 0)
-    i0 = jnp.clip(jnp.floor(safe), 0, n - 2).astype(jnp.int32)
-    frac = safe - i0.astype(safe.dtype)
-    return i0, i0 + 1, frac, ok
+__all__ = ["FrozenTurbulence", "frozen_turbulence"]
 
 
 def _two_product(a, b):
@@ -402,8 +272,8 @@ class _LineSampler(TimeSampler):
         axes = field.axes()
         local = rotate(axes, points - field.anchor).reshape(-1, 3)
         s = box.spacing
-        iy0, iy1, fy, oky = _axis(local[:, 1] / s[1] + (ny - 1) / 2, ny, box.periodic[0])
-        iz0, iz1, fz, okz = _axis(local[:, 2] / s[2], nz, box.periodic[1])
+        iy0, iy1, fy, oky = box_axis(local[:, 1] / s[1] + (ny - 1) / 2, ny, box.periodic[0])
+        iz0, iz1, fz, okz = box_axis(local[:, 2] / s[2], nz, box.periodic[1])
         vel = box.velocity
         n_pts = local.shape[0]
         if directions is not None:
@@ -473,46 +343,4 @@ def frozen_turbulence(mean, box, speed, direction, **kwargs) -> FrozenTurbulence
     return FrozenTurbulence(mean, box, speed, direction, **kwargs)
 
 
-def mann_box(
-    alphaepsilon: float,
-    length_scale: float,
-    gamma: float,
-    shape: tuple[int, int, int],
-    spacing: tuple[float, float, float],
-    *,
-    seed: int = 1,
-    periodic: bool = False,
-    high_freq_comp: int = 0,
-    dtype=None,
-) -> TurbulenceBox:
-    """Generate a Mann (1994) turbulence box with hipersim (optional extra ``turbulence``).
-
-    **Arguments:**
-
-    - `alphaepsilon`: ``alpha eps^(2/3)`` (m^(4/3)/s^2), the spectral level.
-    - `length_scale`: ``L`` (m); `gamma`: the anisotropy ``Gamma`` (dimensionless).
-    - `shape`: ``(nx, ny, nz)`` nodes; `spacing`: ``(dx, dy, dz)`` in metres.
-    - `seed`: the random seed (hipersim's generator).
-    - `periodic`: ``False`` (default) generates a box twice as wide and high and keeps one
-      quarter (hipersim's ``double_xyz=(False, True, True)``), so it is not periodic laterally
-      and vertically (`TurbulenceBox.periodic` = ``(False, False)``); ``True`` keeps the plain
-      FFT box, periodic in all three directions (what the spectral model of `lidarjax.spectral`
-      describes exactly).
-    - `high_freq_comp`: hipersim's high-frequency compensation option (0, 1 or 2).
-
-    The box is in the box frame of this module (``x`` downwind, ``y`` to the left, ``z`` up),
-    as hipersim makes it.
-    """
-    from ..io._common import import_optional
-
-    hipersim = import_optional("hipersim", "turbulence", "Generating a Mann box")
-    shape = tuple(int(n) for n in shape)
-    field = hipersim.MannTurbulenceField.generate(
-        alphaepsilon=float(alphaepsilon), L=float(length_scale), Gamma=float(gamma),
-        Nxyz=shape, dxyz=tuple(float(d) for d in spacing), seed=int(seed),
-        HighFreqComp=high_freq_comp, double_xyz=(False, not periodic, not periodic),
-    )
-    uvw = np.moveaxis(np.asarray(field.uvw), 0, -1)
-    dtype = default_float() if dtype is None else dtype
-    return TurbulenceBox(jnp.asarray(uvw, dtype=dtype), jnp.asarray(spacing, dtype=dtype),
-                         periodic=(periodic, periodic))
+__getattr__ = deprecated_getattr(__name__)

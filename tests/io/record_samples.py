@@ -1,6 +1,6 @@
 """Synthetic instrument files written by the tests (never copies of real files).
 
-Each writer returns text in the layout of a real export; `tests/io/test_io_records_*.py`
+Each writer returns text in the layout of a real export; `tests/io/test_records_*.py`
 use them. Values are deterministic so that good rows can be compared exactly.
 """
 

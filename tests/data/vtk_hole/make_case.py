@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarjax.io import _cells
-from lidarjax.io._foamwrite import hex_mesh, write_polymesh, write_vector_field
+from tests._foamwrite import hex_mesh, write_polymesh, write_vector_field
 
 AX = np.array([0, 1, 2, 2.5, 3, 3.5, 4, 5, 6.5, 8.0])
 AZ = np.array([0, 0.5, 1, 1.5, 2.25, 3, 4, 5.5, 7.0])

@@ -12,10 +12,10 @@ jax.config.update("jax_enable_x64", True)
 import lidarjax as lj
 from lidarjax.frames import lidar_to_cfd_rotation, rotate
 from lidarjax.io.openfoam import read_openfoam_field, sample_openfoam
-from lidarjax.io.probes import read_openfoam_probes, read_probe_csv
+from lidarjax.io.monitor_points import read_openfoam_probes, read_monitor_points_csv
 
 case = sys.argv[1]; pdir = sys.argv[2]
-locs = read_probe_csv('/work/f11_of/probes/lidarProbes.csv')
+locs = read_monitor_points_csv('/work/f11_of/probes/lidarProbes.csv')
 of = read_openfoam_probes(pdir).values_for(locs)
 scan = lj.windcube_v2()
 mounts = {"roof": np.array([96.0, 126.0, 39.0]), "street": np.array([72.0, 66.0, 1.0])}

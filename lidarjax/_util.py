@@ -1,0 +1,135 @@
+"""Shared non-public helpers of every layer: errors that name a file, atomic writes, optional
+imports, key normalisation and number formatting.
+
+Nothing here is public API, and nothing here imports the rest of lidarjax: every module, from
+the core to the command line, may use it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import math
+import os
+import re
+import uuid
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+
+__all__: list[str] = []
+
+PathLike = str | os.PathLike[str]
+
+
+PathLike = str | os.PathLike[str]
+
+
+def file_error(path: PathLike, line: int | None, message: str) -> ValueError:
+    """A `ValueError` whose message starts with the file and, when known, the 1-based line."""
+    where = f"{os.fspath(path)}, line {line}" if line is not None else os.fspath(path)
+    return ValueError(f"{where}: {message}")
+
+
+def require_file(path: PathLike, what: str) -> Path:
+    """Return `path` as a `Path`, raising `FileNotFoundError` naming it when it is not a file."""
+    p = Path(path)
+    if not p.is_file():
+        if p.exists():
+            raise FileNotFoundError(f"{what} {os.fspath(p)!s} is not a regular file")
+        raise FileNotFoundError(f"{what} not found: {os.fspath(p)!s}")
+    return p
+
+
+def import_optional(module: str, extra: str, purpose: str) -> ModuleType:
+    """Import an optional dependency, or raise an `ImportError` that names the pip extra."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as err:
+        raise ImportError(
+            f"{purpose} needs the optional package '{module}', which is not installed: "
+            f"pip install lidarjax[{extra}]"
+        ) from err
+
+
+def have_module(module: str) -> bool:
+    """Whether `module` can be imported (without raising)."""
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        return False
+    return True
+
+
+def netcdf_engine() -> str:
+    """`h5netcdf` (NetCDF4) when it and h5py are installed, else scipy's NetCDF3 writer."""
+    return "h5netcdf" if have_module("h5netcdf") and have_module("h5py") else "scipy"
+
+
+@contextlib.contextmanager
+def atomic_path(path: PathLike) -> Iterator[Path]:
+    """Yield a fresh temporary path beside `path`; on success move it onto `path` atomically.
+
+    The temporary file lives in the same directory (so `os.replace` is atomic on POSIX
+    and Windows) and keeps the final suffix (some writers dispatch on it). On any
+    exception the temporary file is removed and `path` is left untouched.
+    """
+    target = Path(path)
+    if not target.parent.is_dir():
+        raise FileNotFoundError(f"directory not found: {os.fspath(target.parent)}")
+    tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.tmp{target.suffix}")
+    try:
+        yield tmp
+        with open(tmp, "rb") as fh:  # flush the data to disk before the rename
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_write_text(path: PathLike, text: str, *, encoding: str = "utf-8") -> Path:
+    """Write `text` to `path` atomically (temporary file in the same directory, then rename)."""
+    target = Path(path)
+    with atomic_path(target) as tmp, open(tmp, "x", encoding=encoding, newline="\n") as fh:
+        fh.write(text)
+    return target
+
+
+_UNIT_RE = re.compile(r"\([^)]*\)|\[[^\]]*\]")
+
+
+_NON_ALNUM_RE = re.compile(r"[^0-9a-z]+")
+
+
+def normalise_key(key: str) -> str:
+    """Lower-case `key`, drop bracketed units and every non-alphanumeric character.
+
+    `"ScanAngle (°)"`, `"Scan Angle(°)"` and `"scan_angle"` all become `"scanangle"`.
+    """
+    return _NON_ALNUM_RE.sub("", _UNIT_RE.sub("", key.lower()))
+
+
+def freeze(a: np.ndarray) -> np.ndarray:
+    """Mark an array read-only (records are immutable) and return it."""
+    a.setflags(write=False)
+    return a
+
+
+def format_number(x: float) -> str:
+    """Shortest text that reads back to the same float; integral values without '.0'."""
+    xf = float(x)
+    if math.isfinite(xf) and xf.is_integer() and abs(xf) < 1e15:
+        return str(int(xf))
+    return repr(xf)
+
+
+def summarise_lines(lines: Sequence[int], limit: int = 8) -> str:
+    """`'12, 40, 41'` or `'12, 40, ... (25 lines)'`."""
+    shown = ", ".join(str(n) for n in lines[:limit])
+    return shown if len(lines) <= limit else f"{shown}, ... ({len(lines)} lines)"
+
+

@@ -1,0 +1,14 @@
+"""Workflows: files in, files out, built on the core, the scenes and `lidarjax.io`.
+
+- `seed_tables`: the seed UDF's job: `simulate_settings` (one CFD run per platform rotation
+  of a ``settings.dat``), `build_table` (a `lidarjax.ResponseTable` from CFD runs).
+- `records`: real lidar records end to end: `load_records`, `check_instrument`,
+  `correct_records`, `write_corrected_csv`, `write_corrected_netcdf`.
+- `monitor_points`: the CFD code samples the beams itself: `monitor_points` lists the points,
+  `simulate_from_monitor_points` runs the forward model on what the CFD code sampled.
+- `series_report`: a simulated series' ``.sta``, statistics CSV and figure.
+- `farm_study`: a lidar in a wind farm over many directions (`farm_study`).
+- `demo`: the built-in job of ``lidarjax demo`` (`run_demo`).
+
+Each public name is also ``lidarjax.<name>``.
+"""

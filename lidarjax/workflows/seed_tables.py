@@ -1,0 +1,213 @@
+"""The seed UDF's workflow on top of `simulate`: settings.dat in, seed output files out.
+
+`simulate_settings` runs every platform rotation (beta) of a `Settings` in one compiled
+batch when the CFD runs share a grid (one trace, ``jax.vmap`` over the runs), and
+`seed_columns` turns a `Simulation` into the seed's 21 output columns.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._util import import_optional
+from ..angles import horizontal_speed, seed_azimuth
+from ..batch import simulate_rotations, stack_fields
+from ..field import GridField
+from ..footprint import scan_bounds
+from ..forward import Simulation, simulate
+from ..io.settings import Settings
+from ..mount import Mount
+from ..response import ResponseTable
+
+__all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "SEED_U_REF"]
+
+#: The free stream hard-coded in the seed UDF (its CFD inlet), CFD frame, m/s.
+SEED_U_REF = (-15.0, 0.0, 0.0)
+
+
+def seed_columns(sim: Simulation) -> dict[str, np.ndarray]:
+    """The seed's 21 output columns for one `Simulation` (heights ``(h,)``).
+
+    Speeds in m/s, ``Th_lidar`` / ``th_point`` in the seed's azimuth (flow heading clockwise
+    from ``+x``; see `lidarjax.seed_azimuth`), factors as in `lidarjax.corrections`. Factors
+    whose reference was not simulated are NaN.
+    """
+    h = np.asarray(sim.heights)
+    nan = np.full(h.shape, np.nan)
+    L = sim.lidar_velocity
+    P = sim.point_velocity if sim.point_velocity is not None else jnp.full(L.shape, jnp.nan)
+    cols = {
+        "h": h,
+        "U_mag_lidar": horizontal_speed(L), "U_lidar": L[:, 0], "V_lidar": L[:, 1],
+        "W_lidar": L[:, 2], "Th_lidar": seed_azimuth(L),
+        "U_mag_point": horizontal_speed(P), "U_point": P[:, 0], "V_point": P[:, 1],
+        "W_point": P[:, 2], "th_point": seed_azimuth(P),
+    }
+    for name in ("cff_u", "cff_v", "cff_w", "cff_U", "cff_th",
+                 "cfp_u", "cfp_v", "cfp_w", "cfp_U", "cfp_th"):
+        value = getattr(sim, name)
+        cols[name] = nan if value is None else value
+    return {k: np.asarray(v, dtype=np.float64) for k, v in cols.items()}
+
+
+def settings_mounts(settings: Settings, betas: Sequence[float], *, pitch: float = 0.0,
+                    roll: float = 0.0) -> list[Mount]:
+    """The `Mount` of each platform rotation: the settings' location row for that beta and
+    its gamma, psi and epsilon, with the installation's `pitch` and `roll` (degrees)."""
+    return [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
+                  epsilon=settings.epsilon, pitch=pitch, roll=roll) for b in betas]
+
+
+def simulate_settings(
+    settings: Settings,
+    betas: Sequence[float],
+    field_for_beta: Callable[[float], GridField],
+    scan,
+    *,
+    u_ref=SEED_U_REF,
+    probe=None,
+    pitch: float = 0.0,
+    roll: float = 0.0,
+) -> dict[float, Simulation]:
+    """Simulate the lidar of `settings` for each platform rotation in `betas`.
+
+    **Arguments:**
+
+    - `settings`: a `lidarjax.io.Settings` (heights ``j * height / nh``, gamma, psi,
+      epsilon and one location per beta).
+    - `betas`: platform rotations (degrees) to run; each needs a location row.
+    - `field_for_beta`: loads the CFD run of one beta (e.g. ``lidarjax.io.load_field``).
+    - `scan`: the `lidarjax.Scan`.
+    - `u_ref`: free-stream vector in the CFD frame (m/s); default the seed UDF's.
+    - `probe`: probe volume (default point).
+    - `pitch`, `roll`: the installation's tilt in degrees (`lidarjax.Mount`), default level.
+
+    **Returns:** ``{beta: Simulation}``. Runs on one grid are simulated in one compiled,
+    vmapped batch; otherwise one call per run (one compilation per distinct grid shape).
+    """
+    betas = [float(b) for b in betas]
+    mounts = settings_mounts(settings, betas, pitch=pitch, roll=roll)
+    heights = jnp.asarray(settings.heights())
+    fields = [field_for_beta(b) for b in betas]
+    try:
+        stacked = stack_fields(fields) if len(fields) > 1 else None
+    except ValueError:  # runs on different grids: one call (and compilation) per grid
+        stacked = None
+    if stacked is None:
+        return {b: simulate(f, scan, m, heights, u_ref=u_ref, probe=probe)
+                for b, f, m in zip(betas, fields, mounts, strict=True)}
+    batch = simulate_rotations(stacked, scan, mounts, heights, u_refs=u_ref, probe=probe)
+    return {b: jax.tree_util.tree_map(lambda a, i=i: a[i], batch) for i, b in enumerate(betas)}
+
+
+def build_table(
+    settings: Settings,
+    betas: Sequence[float],
+    field_for_beta: Callable[[float], GridField],
+    scan,
+    *,
+    u_ref=SEED_U_REF,
+    probe=None,
+    pitch: float = 0.0,
+    roll: float = 0.0,
+    client=None,
+    progress: bool = False,
+):
+    """A `lidarjax.ResponseTable` from the CFD runs of a seed settings file.
+
+    Each platform rotation ``beta`` is one inflow direction; the table's directions are the
+    free streams' meteorological directions in the north frame. Returns ``(table, sims)``.
+
+    Runs are loaded **one at a time**: each `GridField` returned by `field_for_beta` is cut
+    at once to `scan_bounds` of all mounts (with the probe; `GridField.crop`, bit-exact),
+    simulated, and dropped, so the peak memory is about one run whatever their number.
+    `field_for_beta` may load only that region itself (``lidarjax.io.load_field(path,
+    region=...)``, with `table_region` giving it); any other `AbstractField` (an analytic
+    scene) is used as it is.
+
+    **Arguments** (besides those of `simulate_settings`):
+
+    - `client`: a ``dask.distributed.Client``; runs are then read and simulated in parallel
+      on its workers (`field_for_beta` is shipped to them, so it must be picklable by
+      cloudpickle and read files the workers can see). The workers must use the caller's
+      ``jax_enable_x64`` setting (checked: the command line sets it on them). The table is
+      identical to the serial one.
+    - `pitch`, `roll`: the installation's tilt in degrees (`lidarjax.Mount`), default level.
+    - `progress`: one line per finished run on stderr (run, beta, grid before and after the
+      crop, seconds).
+    """
+
+    betas = [float(b) for b in betas]
+    mounts = settings_mounts(settings, betas, pitch=pitch, roll=roll)
+    heights = np.asarray(settings.heights())
+    lo, hi = table_region(settings, betas, scan, probe=probe, pitch=pitch, roll=roll)
+    u_ref = np.asarray(u_ref, np.float64)
+    tasks = [(b, m) for b, m in zip(betas, mounts, strict=True)]
+    run = _TableRun(field_for_beta, scan, heights, u_ref, probe, lo, hi)
+    sims: dict[float, Simulation] = {}
+
+    def report(k, result):
+        b, sim, info = result
+        sims[b] = sim
+        if progress:
+            print(f"table: run {k}/{len(betas)} beta {b:g}: grid {info['shape']} -> crop "
+                  f"{info['crop']} in {info['seconds']:.1f} s", file=sys.stderr)
+
+    if client is None:
+        for k, task in enumerate(tasks, 1):
+            report(k, run(task))
+    else:
+        distributed = import_optional("distributed", "dask", "build_table(client=...)")
+        futures = client.map(run, tasks, pure=False)
+        for k, fut in enumerate(distributed.as_completed(futures), 1):
+            report(k, fut.result())
+        want = np.dtype(jnp.zeros(()).dtype)
+        got = {np.dtype(np.asarray(s.los).dtype) for s in sims.values()}
+        if got != {want}:
+            raise ValueError(
+                f"build_table: the dask workers computed in {', '.join(map(str, got))} but this "
+                f"process uses {want}; set the same jax_enable_x64 on the workers, e.g. "
+                "client.run(jax.config.update, 'jax_enable_x64', True)")
+    sims = {b: sims[b] for b in betas}
+    table = ResponseTable.from_simulations(list(sims.values()), mount=mounts)
+    return table, sims
+
+
+def table_region(settings: Settings, betas: Sequence[float], scan, *, probe=None,
+                 pitch: float = 0.0, roll: float = 0.0):
+    """``(lo, hi)`` absolute CFD metres: the box every mount of `settings` at `betas` (with
+    the installation's `pitch` and `roll`, degrees) samples (`lidarjax.scan_bounds` of all of
+    them with the probe and the point reference); the region to load from each CFD run."""
+
+    mounts = settings_mounts(settings, [float(b) for b in betas], pitch=pitch, roll=roll)
+    return scan_bounds(scan, mounts, np.asarray(settings.heights()), probe=probe)
+
+
+class _TableRun:
+    """One run of `build_table`: load, crop to the region, simulate, return host arrays.
+    A plain class (not a closure) so dask can ship it to workers."""
+
+    def __init__(self, field_for_beta, scan, heights, u_ref, probe, lo, hi):
+        self.field_for_beta = field_for_beta
+        self.scan, self.heights, self.u_ref, self.probe = scan, heights, u_ref, probe
+        self.lo, self.hi = lo, hi
+
+    def __call__(self, task):
+        beta, mount = task
+        t0 = time.perf_counter()
+        field = self.field_for_beta(beta)
+        shape = getattr(field, "shape", None)
+        if isinstance(field, GridField):
+            field = field.crop(self.lo, self.hi)
+        crop = getattr(field, "shape", None)
+        sim = simulate(field, self.scan, mount, jnp.asarray(self.heights), u_ref=self.u_ref,
+                       probe=self.probe)
+        del field
+        sim = jax.tree_util.tree_map(np.asarray, sim)
+        return beta, sim, {"shape": shape, "crop": crop, "seconds": time.perf_counter() - t0}

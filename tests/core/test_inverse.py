@@ -1,0 +1,317 @@
+"""invert / invert_reconstructed: recovery, convergence order, robustness, noise, gradients.
+
+Every call goes through `solve`, which pads the records to a fixed count so that one
+compiled solver serves the whole module (float64, 4 heights, 5 beams, 12 or 24 sectors).
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import lidarjax as lj
+from lidarjax.flags import InverseFlag
+
+from .. import sites
+
+R = 64  # records per compiled call
+
+
+def solve(table, los, **kwargs):
+    los = jnp.asarray(los)
+    n = los.shape[0]
+    pad = jnp.full((R - n,) + los.shape[1:], jnp.nan, los.dtype)
+    out = lj.invert(table, jnp.concatenate([los, pad]), **kwargs)
+    return jax.tree_util.tree_map(lambda a: a[:n], out)
+
+
+def _truth(cfd_directions, speeds):
+    sims = sites.records(cfd_directions, speeds)
+    return sims, np.asarray(sims.free_speed), np.asarray(sims.free_direction)
+
+
+def _errors(inv, speed, direction):
+    es = np.abs(np.asarray(inv.speed) / speed[:, None] - 1.0)
+    ed = np.abs(np.asarray(lj.wrap180(inv.direction - direction[:, None])))
+    return es, ed
+
+
+@pytest.fixture(scope="module")
+def table():
+    return sites.table(30.0)
+
+
+@pytest.fixture(scope="module")
+def random_records():
+    rng = np.random.default_rng(1)
+    return _truth(rng.uniform(0.0, 360.0, R), rng.uniform(2.0, 20.0, R))
+
+
+def test_table_directions_recovered_to_1e_8(table):
+    cfd = np.arange(0.0, 360.0, 30.0)
+    speeds = np.linspace(0.5, 25.0, cfd.size)
+    sims, speed, direction = _truth(cfd, speeds)
+    inv = solve(table, sims.los)
+    es, ed = _errors(inv, speed, direction)
+    assert np.all(inv.converged)
+    assert es.max() < 1e-8 and ed.max() < 1e-8
+    assert np.all(inv.num_steps <= 2)
+    assert np.all(inv.flags == 0) and np.all(inv.result == optx.RESULTS.successful)
+
+
+def test_other_directions_far_better_than_uncorrected_at_spline_order(table, random_records):
+    sims, speed, direction = random_records
+    inv30 = solve(table, sims.los)
+    inv15 = solve(sites.table(15.0), sims.los)
+    es30, ed30 = _errors(inv30, speed, direction)
+    es15, ed15 = _errors(inv15, speed, direction)
+    unc_s = np.abs(np.asarray(sims.lidar_speed) / speed[:, None] - 1.0)
+    unc_d = np.abs(np.asarray(lj.wrap180(sims.lidar_direction - direction[:, None])))
+    assert np.all(inv30.converged) and np.all(inv15.converged)
+    # per height, the mean inverse error is far below the uncorrected one (15-degree
+    # sectors: over 500 times; 30-degree sectors: over 50 times)
+    assert np.all(es15.mean(0) * 500 < unc_s.mean(0)), (es15.mean(0), unc_s.mean(0))
+    assert np.all(ed15.mean(0) * 500 < unc_d.mean(0)), (ed15.mean(0), unc_d.mean(0))
+    assert np.all(es30.mean(0) * 50 < unc_s.mean(0)), (es30.mean(0), unc_s.mean(0))
+    assert np.all(ed30.mean(0) * 50 < unc_d.mean(0)), (ed30.mean(0), unc_d.mean(0))
+    # halving the sector spacing divides the error by about 2**4
+    order_s = np.log2(es30.max() / es15.max())
+    order_d = np.log2(ed30.max() / ed15.max())
+    assert order_s > 3.5 and order_d > 3.5, (order_s, order_d)
+
+
+def test_start_at_359_converges_to_1_degree():
+    table = sites.table(30.0, first=-sites.EPSILON - 1.0)  # knots at 359, 29, 59, ... (north)
+    assert float(table.directions[-1]) == pytest.approx(359.0)
+    sims, speed, direction = _truth([1.0 - sites.EPSILON, 0.2 - sites.EPSILON], [8.0, 8.0])
+    inv = solve(table, sims.los)
+    assert np.all(inv.converged)
+    np.testing.assert_allclose(inv.direction[0], 1.0, atol=1e-3)
+    np.testing.assert_allclose(inv.direction[1], 0.2, atol=1e-3)
+    assert np.all((inv.direction >= 0) & (inv.direction < 360))
+    assert np.all(inv.num_steps <= 6)
+
+
+def test_bad_records_are_contained(table):
+    sims, _, truth = _truth([1.0, 200.0], [8.0, 12.0])
+    clean = np.asarray(sims.los[0])
+    other = np.asarray(sims.los[1])
+    cases = {
+        "zero": np.zeros_like(clean),
+        "miss1": np.where(np.arange(5) == 1, np.nan, clean),
+        "miss2": np.where(np.isin(np.arange(5), [1, 3]), np.nan, clean),
+        "miss3": np.where(np.arange(5) < 3, np.nan, clean),
+        "wild": clean + np.where(np.arange(5) == 2, 50.0, 0.0),
+        "equal": np.full_like(clean, 5.0),
+        "all_nan": np.full_like(clean, np.nan),
+        "inf": np.where(np.arange(5) == 0, np.inf, clean),
+        "huge": clean * 1e6,
+        "tiny": clean * 1e-9,
+    }
+    batch = np.stack([other] + [x for c in cases.values() for x in (c, other)])
+    inv = solve(table, batch, max_steps=32)
+    alone = solve(table, other[None])
+    # neighbours are bit-for-bit what they are alone
+    for i in range(0, batch.shape[0], 2):
+        np.testing.assert_array_equal(inv.speed[i], alone.speed[0])
+        np.testing.assert_array_equal(inv.direction[i], alone.direction[0])
+    assert np.all(inv.num_steps <= 32)
+    res = {k: jax.tree_util.tree_map(lambda a, i=i: a[2 * i + 1], inv) for i, k in enumerate(cases)}
+    # finite answer with honest (finite or inf) uncertainty, or NaN with converged=False
+    for k, r in res.items():
+        ok = np.asarray(r.converged)
+        assert np.all(np.isfinite(r.speed[ok])), k
+        assert np.all(~np.isnan(r.speed_std[ok])), k
+        assert np.all(np.isnan(r.speed[~ok])), k
+    z = res["zero"]
+    assert np.all(z.converged) and np.all(z.speed == 0) and np.all(np.isnan(z.direction))
+    assert np.all(z.flags & InverseFlag.CALM) and np.all(np.isinf(z.direction_std))
+    for k in ("miss1", "miss2", "huge", "tiny"):
+        scale = {"huge": 1e6, "tiny": 1e-9}.get(k, 1.0)
+        assert np.all(res[k].converged), k
+        np.testing.assert_allclose(res[k].speed, 8.0 * scale, rtol=1e-3)
+        np.testing.assert_allclose(lj.wrap180(res[k].direction - truth[0]), 0.0, atol=0.05)
+    assert np.all(res["miss2"].n_beams == 3)
+    for k in ("miss3", "all_nan"):
+        assert not np.any(res[k].converged)
+        assert np.all(res[k].flags & InverseFlag.TOO_FEW_BEAMS), k
+    assert np.all(res["inf"].converged) and np.all(res["inf"].n_beams == 4)
+    # a wild beam or an impossible pattern is fitted with an honestly large uncertainty
+    for k in ("wild", "equal"):
+        r = res[k]
+        assert np.all(r.converged), k
+        assert np.all(r.speed_std > 1.0), (k, r.speed_std)
+        assert np.all(r.residual_rms > 1.0), k
+
+
+def test_weights_and_missing_beams_agree(table, random_records):
+    sims, _, _ = random_records
+    los = np.asarray(sims.los[:8])
+    w = np.ones(5)
+    w[2] = 0.0
+    a = solve(table, los, weights=w)
+    b = solve(table, np.where(np.arange(5) == 2, np.nan, los))
+    np.testing.assert_allclose(a.speed, b.speed, rtol=1e-12)
+    np.testing.assert_allclose(a.direction, b.direction, rtol=1e-12)
+    # scaling all weights by 4 changes nothing but the given-noise uncertainty (halved)
+    c = solve(table, los, weights=4.0, noise=0.1)
+    d = solve(table, los, noise=0.1)
+    np.testing.assert_allclose(c.speed, d.speed, rtol=1e-10)
+    np.testing.assert_allclose(c.speed_std, d.speed_std / 2, rtol=1e-10)
+
+
+def test_noise_bias_and_uncertainty_match_monte_carlo(table):
+    sigma = 0.1
+    sims, speed, direction = _truth([77.0], [8.0])
+    rng = np.random.default_rng(2)
+    n_chunks = 15
+    speeds, dirs, sstd, dstd, noise = [], [], [], [], []
+    for _ in range(n_chunks):
+        los = np.asarray(sims.los) + sigma * rng.standard_normal((R,) + sims.los.shape[1:])
+        given = solve(table, los, noise=sigma)
+        est = solve(table, los)
+        assert np.all(given.converged)
+        speeds.append(given.speed)
+        dirs.append(given.direction)
+        sstd.append(given.speed_std)
+        dstd.append(given.direction_std)
+        noise.append(est.noise)
+    speeds, dirs, sstd, dstd, noise = (np.concatenate(a) for a in (speeds, dirs, sstd, dstd, noise))
+    n = speeds.shape[0]
+    err_s = speeds - speed[0]
+    err_d = np.asarray(lj.wrap180(dirs - direction[0]))
+    # bias near zero: within 4 standard errors
+    assert np.all(np.abs(err_s.mean(0)) < 4 * err_s.std(0) / np.sqrt(n))
+    assert np.all(np.abs(err_d.mean(0)) < 4 * err_d.std(0) / np.sqrt(n))
+    # predicted standard deviations match the Monte Carlo spread within 10 %
+    np.testing.assert_allclose(sstd.mean(0), err_s.std(0), rtol=0.1)
+    np.testing.assert_allclose(dstd.mean(0), err_d.std(0), rtol=0.1)
+    # 95 % intervals cover about 95 %
+    cover = np.mean(np.abs(err_s) < 1.96 * sstd)
+    assert 0.93 < cover < 0.97, cover
+    # the residual estimate of the noise is unbiased in variance (3 spare beams)
+    np.testing.assert_allclose(np.mean(noise**2), sigma**2, rtol=0.1)
+
+
+def test_gradients_match_finite_differences(table, random_records):
+    sims, _, _ = random_records
+    los = np.asarray(sims.los[:4])
+
+    def outputs(x):
+        inv = solve(table, x)
+        return jnp.stack([inv.speed[0], inv.direction[0]])  # (2, h)
+
+    jac = jax.jacrev(outputs)(jnp.asarray(los))  # (2, h, 4, h, b)
+    eps = 1e-6
+    for b in range(5):
+        for h in (0, 3):
+            dp, dm = los.copy(), los.copy()
+            dp[0, h, b] += eps
+            dm[0, h, b] -= eps
+            fd = (outputs(dp) - outputs(dm)) / (2 * eps)
+            np.testing.assert_allclose(jac[:, :, 0, h, b], fd, rtol=1e-5, atol=1e-7)
+    # only the record's own LOS at the same height matter
+    assert np.all(jac[:, :, 1:] == 0)
+    assert np.all(jac[:, 0, 0, 1:] == 0)
+
+
+def test_float32_in_float32_out_and_chunked_batches(table, random_records):
+    sims, speed, direction = random_records
+    los32 = np.asarray(sims.los, np.float32)
+    # 64 records in batches of 24 records (96 problems): three batches, the last one padded
+    inv = solve(table, los32, batch_size=96, noise=0.1)
+    assert inv.speed.dtype == jnp.float32 and inv.speed_std.dtype == jnp.float32
+    assert np.all(inv.converged)
+    ref = solve(table, np.asarray(sims.los), noise=0.1)
+    np.testing.assert_allclose(inv.speed, ref.speed, rtol=2e-5)
+    np.testing.assert_allclose(lj.wrap180(inv.direction - ref.direction), 0.0, atol=2e-3)
+    np.testing.assert_allclose(inv.speed_std, ref.speed_std, rtol=1e-3)
+
+
+def reconstructed(table, speed, direction, **kwargs):
+    """`invert_reconstructed` padded to 360 records: the shape `correction_rose` compiles."""
+    n = speed.shape[0]
+    pad = lambda a: jnp.concatenate([a, jnp.ones((360 - n,) + a.shape[1:], a.dtype)])  # noqa: E731
+    out = lj.invert_reconstructed(table, pad(jnp.asarray(speed)), pad(jnp.asarray(direction)),
+                                  **kwargs)
+    return jax.tree_util.tree_map(lambda a: a[:n], out)
+
+
+def test_invert_reconstructed(table, random_records):
+    sims, speed, direction = random_records
+    inv = reconstructed(table, sims.lidar_speed, sims.lidar_direction)
+    es, ed = _errors(inv, speed, direction)
+    unc = np.abs(np.asarray(sims.lidar_speed) / speed[:, None] - 1.0)
+    assert np.all(inv.converged)
+    assert np.all(es.mean(0) * 100 < unc.mean(0))
+    assert np.all(ed < 0.05)
+    # two equations, two unknowns: no spare for a noise estimate unless one is given
+    assert np.all(inv.flags & InverseFlag.NO_NOISE_ESTIMATE) and np.all(np.isnan(inv.speed_std))
+    # calm, and a direction missing for a positive speed
+    s = np.array(sims.lidar_speed[:R])
+    d = np.array(sims.lidar_direction[:R])
+    s[0] = 0.0
+    d[0] = np.nan
+    d[1, 2] = np.nan
+    bad = reconstructed(table, s, d, noise=0.05)
+    assert np.all(bad.converged[0]) and np.all(bad.speed[0] == 0)
+    assert not bad.converged[1, 2] and np.isnan(bad.speed[1, 2])
+    np.testing.assert_allclose(bad.speed[2:], inv.speed[2:], rtol=1e-12)
+    assert np.all(np.isfinite(bad.speed_std[2:]))
+
+
+def test_validation(table):
+    good = np.zeros((3, table.n_heights, table.n_beams))
+    with pytest.raises(ValueError, match=r"\(h, b\) = \(4, 5\)"):
+        lj.invert(table, good[..., :4])
+    with pytest.raises(ValueError, match=r"\(h, b\)"):
+        lj.invert(table, good[0, 0])
+    with pytest.raises(ValueError, match="weights"):
+        lj.invert(table, good, weights=np.ones(3))
+    with pytest.raises(ValueError, match="nonnegative"):
+        lj.invert(table, good, weights=-np.ones(5))
+    with pytest.raises(ValueError, match="noise"):
+        lj.invert(table, good, noise=0.0)
+    with pytest.raises(ValueError, match="min_beams"):
+        lj.invert(table, good, min_beams=1)
+    with pytest.raises(ValueError, match="ResponseTable"):
+        lj.invert("table", good)
+    with pytest.raises(ValueError, match=r"\(\.\.\., h\)"):
+        lj.invert_reconstructed(table, np.ones(3), np.ones(3))
+    bare = lj.ResponseTable(table.directions, table.response)
+    with pytest.raises(ValueError, match="reconstructed"):
+        lj.invert_reconstructed(bare, np.ones(4), np.ones(4))
+
+
+def _distorted_table(seed):
+    """A Windcube-like table whose response is far from a first harmonic of direction."""
+    rng = np.random.default_rng(seed)
+    d = np.sort(rng.choice(np.arange(0.0, 360.0, 5.0), size=24, replace=False))
+    r = np.deg2rad(d)[:, None, None]
+    az = np.deg2rad(np.array([0.0, 90.0, 180.0, 270.0, 0.0]))
+    cone = np.deg2rad(np.array([28.0, 28.0, 28.0, 28.0, 0.0]))
+    homogeneous = -np.sin(cone) * np.cos(r - az)  # LOS of a unit wind from direction d
+    k = np.arange(2, 5)[:, None, None, None]
+    amp = 0.04 * rng.standard_normal((3, 1, 2, 5))
+    phase = rng.uniform(0, 2 * np.pi, (3, 1, 2, 5))
+    distortion = np.sum(amp * np.cos(k * r[None] + phase), axis=0)
+    return lj.ResponseTable(d, homogeneous * (1.0 + 0.2 * np.cos(r)) + distortion)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    speed=st.floats(0.3, 40.0),
+    direction=st.floats(0.0, 360.0, exclude_max=True),
+    seed=st.integers(0, 5),
+)
+def test_exact_model_records_are_recovered_on_nonuniform_distorted_tables(speed, direction, seed):
+    table = _distorted_table(seed)
+    los = speed * table.response_at(jnp.asarray([direction]))
+    inv = solve(table, los)
+    assert np.all(inv.converged)
+    np.testing.assert_allclose(inv.speed, speed, rtol=1e-8)
+    np.testing.assert_allclose(lj.wrap180(inv.direction - direction), 0.0, atol=1e-6)
+    assert np.all(inv.num_steps <= 8)
