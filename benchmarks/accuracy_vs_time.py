@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 
 import jax
@@ -37,7 +36,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _timing import median_time  # noqa: E402
+from _common import machine, median_time  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
 
@@ -146,7 +145,7 @@ def main():
     RESULTS.mkdir(exist_ok=True)
     meta = dict(heights=HEIGHTS.tolist(), sectors=sectors, reference_nodes=REF_NODES,
                 scan="windcube_v2(28)", probe="PulsedProbe() defaults", quick=args.quick,
-                repeats=repeats, cpu_count=os.cpu_count(), jax=jax.__version__)
+                repeats=repeats, machine=machine())
     with open(RESULTS / "accuracy_vs_time.json", "w") as fh:
         json.dump({"meta": meta, "rows": rows}, fh, indent=1)
     write_table(rows, RESULTS / "accuracy_vs_time.md")

@@ -33,6 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import machine, machine_line  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -202,8 +203,7 @@ def main() -> None:
     ap.add_argument("--turbine-probes", default="/work/i11a_of/ts/postProcessing/probes/168/U")
     args = ap.parse_args()
     sizes = args.sizes or ([1e5] if args.quick else [1e5, 1e6, 5e6])
-    results: dict = {"hemisphere": [], "turbineSiting": None, "machine": os.uname().nodename,
-                     "cores": os.cpu_count()}
+    results: dict = {"hemisphere": [], "turbineSiting": None, "machine": machine()}
     data = ROOT / "tests" / "data" / "openfoam"
     with tempfile.TemporaryDirectory(prefix="cfd_ingest_") as tmp:
         for n in sizes:
@@ -242,8 +242,8 @@ def main() -> None:
 
 def write_md(res: dict, path: Path) -> None:
     lines = ["# CFD ingest (benchmarks/cfd_ingest.py)", "",
-             f"Machine: {res['cores']} cores (shared). Each load in a fresh process; peak = max RSS of "
-             "that process (includes JAX).", "",
+             f"Machine: {machine_line(res['machine'])} (shared). Each load in a fresh process; "
+             "peak = max RSS of that process (includes JAX).", "",
              "## Graded hemisphere mesh (exact potential flow), Windcube V2 on the body", "",
              "| cells | path | load s | peak GB | grid | max speed error m/s (heights " +
              ", ".join(f"{h:g}" for h in HEIGHTS) + " m) |", "|---|---|---|---|---|---|"]

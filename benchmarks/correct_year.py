@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import re
 import subprocess
 import sys
@@ -32,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import machine, machine_line  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 HEIGHTS = np.array([40, 54, 74, 94, 114, 134, 154, 174, 194, 214, 234, 254], float)
@@ -157,8 +157,7 @@ def main():
                                       str(work / "big.csv")], env)
     lines = sum(1 for _ in open(work / "year.csv")) if (work / "year.csv").exists() else 0
     out = {
-        "machine": f"{os.cpu_count()} CPUs ({platform.platform()}), Python "
-                   f"{platform.python_version()}",
+        "machine": machine(),
         "load_average_at_start": os.getloadavg()[0],
         "rows_year": n_year, "rows_big": n_big, "heights": int(HEIGHTS.size),
         "csv_lines_year": lines,
@@ -171,7 +170,7 @@ def main():
     name = "correct_year_quick" if args.quick else "correct_year"
     (res / f"{name}.json").write_text(json.dumps(out, indent=2) + "\n")
     md = ["# lidarjax correct: a year of 10-minute records, whole command", "",
-          f"{out['machine']}; load average at start {out['load_average_at_start']:.1f}. "
+          f"{machine_line(out['machine'])}; load average at start {out['load_average_at_start']:.1f}. "
           f"Each run is a fresh `python -m lidarjax.cli correct` process (import, read, "
           f"invert, write CSV + NetCDF); wall time, CPU time (user + system, all threads) "
           f"and peak resident memory. On a loaded machine the wall time grows with the load; "

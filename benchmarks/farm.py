@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -43,6 +41,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _common import machine, machine_line  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
 from lidarjax.disturbed_sectors import disturbed_sectors, in_sectors, merge_sectors  # noqa: E402
@@ -219,7 +218,7 @@ def write(results):
     t, inv = results["throughput"], results["inverse"]
     lines = ["# Farm benchmark", "",
              f"{t['n_turbines']} turbines, {t['n_directions']} directions, {t['n_points']} pulsed-probe "
-             f"points per direction ({results['machine']}).", "",
+             f"points per direction ({machine_line(results['machine'])}).", "",
              "| | seconds (median) | ratio |", "|---|---|---|"]
     if "floris_points_s" in t:
         lines.append(f"| FLORIS sample_flow_at_points ({t.get('floris_directions', t['n_directions'])} "
@@ -294,8 +293,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     old = RESULTS / "farm.json"
     results = json.loads(old.read_text()) if args.only and old.is_file() else {}
-    results.update(quick=args.quick, machine=f"{platform.machine()}, {os.cpu_count()} cores, "
-                   f"jax {jax.__version__}, {jax.devices()[0].platform}")
+    results.update(quick=args.quick, machine=machine())
     if args.only != "inverse":
         results["throughput"] = throughput(args.quick)
         print(json.dumps(results["throughput"], indent=1))

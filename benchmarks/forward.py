@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import time
 from pathlib import Path
 
@@ -43,7 +42,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
-from _timing import median_time  # noqa: E402
+from _common import machine, median_time  # noqa: E402
 from scipy.interpolate import RegularGridInterpolator  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
@@ -350,10 +349,8 @@ def main():
     RESULTS.mkdir(exist_ok=True)
     meta = dict(
         grid=list(GRID), heights=HEIGHTS.size, beams=SCAN.n_beams, nodes=PROBE.n_nodes,
-        repeats=repeats, quick=args.quick, cpu_count=os.cpu_count(),
-        machine=platform.machine(), processor=platform.processor(),
-        python=platform.python_version(), jax=jax.__version__, numba=numba.__version__,
-        numpy=np.__version__, numba_threads=numba.get_num_threads(),
+        repeats=repeats, quick=args.quick, machine=machine(), numba=numba.__version__,
+        numba_threads=numba.get_num_threads(),
     )
     with open(RESULTS / "forward.json", "w") as fh:
         json.dump({"meta": meta, "rows": rows, "crop": crop}, fh, indent=1)

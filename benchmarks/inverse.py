@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -45,6 +43,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy  # noqa: E402
+from _common import machine, machine_line  # noqa: E402
 from jaxtyping import Array, Float  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
@@ -242,11 +241,8 @@ def main(argv=None):
     sector = 10.0
     out = dict(
         quick=quick, sector_deg=sector, heights_m=list(HEIGHTS), noise_ms=NOISE,
-        batch_size=batch_size, machine=dict(
-            platform=platform.platform(), cpus=os.cpu_count(), jax=jax.__version__,
-            jax_backend=jax.default_backend(), scipy=scipy.__version__,
-            equinox=eqx.__version__, lidarjax=lj.__version__,
-        ),
+        batch_size=batch_size, machine=machine(),
+        versions=dict(scipy=scipy.__version__, equinox=eqx.__version__, lidarjax=lj.__version__),
     )
 
     t0 = time.perf_counter()
@@ -333,8 +329,8 @@ def main(argv=None):
 
     # --- floor and baselines on all problems ------------------------------------------------
     x = jnp.asarray(los)
-    homog = zc.homogeneous(table, x)
-    run, _ = median_time(lambda: zc.homogeneous(table, x).speed, repeats)
+    homog = zc.homogeneous_wind(table, x)
+    run, _ = median_time(lambda: zc.homogeneous_wind(table, x).speed, repeats)
     out["homogeneous"] = dict(problems=n_all, run_s=run, problems_per_s=n_all / run)
     print(f"homogeneous: {n_all / run:,.0f} problems/s", flush=True)
     rose = lj.correction_rose(table)
@@ -366,7 +362,7 @@ def main(argv=None):
         return w.speed / lj.horizontal_speed(p), jnp.mod(w.direction + addend, 360.0)
 
     def accuracy(x, inv):
-        homog = zc.homogeneous(table, x)
+        homog = zc.homogeneous_wind(table, x)
         vec = zc.vector_correction(table, x)
         sca = zc.scalar_correction(table, homog.speed, homog.direction, x[..., 4])
         rec = lj.invert_reconstructed(table, homog.speed, homog.direction)
@@ -450,8 +446,8 @@ def main(argv=None):
 def markdown(out):
     lines = [f"# lidarjax.invert benchmark{' (quick)' if out['quick'] else ''}", ""]
     m = out["machine"]
-    lines += [f"{m['cpus']} CPUs ({m['platform']}), JAX {m['jax']} on {m['jax_backend']}, "
-              f"SciPy {m['scipy']}; table every {out['sector_deg']:g} degrees, "
+    lines += [f"{machine_line(m)}, SciPy {out['versions']['scipy']}; "
+              f"table every {out['sector_deg']:g} degrees, "
               f"{len(out['heights_m'])} heights, LOS noise {out['noise_ms']} m/s, "
               f"batch size {out['batch_size']}. Times are medians of repeats.", ""]
     lines += ["| method | problems | compile (s) | run (s) | problems/s |",

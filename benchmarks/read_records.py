@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import subprocess
 import sys
 import tempfile
@@ -20,6 +19,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import machine  # noqa: E402
 
 CHILD = r"""
 import sys, time
@@ -78,7 +78,7 @@ def main() -> None:
         baselines = ["pandas_read_csv"]
     except ImportError:
         baselines = []
-    results = {"machine": platform.platform(), "python": platform.python_version(), "runs": {}}
+    results = {"machine": machine(), "runs": {}}
     with tempfile.TemporaryDirectory() as d:
         for label, n in sizes.items():
             path = Path(d) / f"{label}.sta"

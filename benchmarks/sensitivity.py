@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import time
 from pathlib import Path
 
@@ -47,7 +46,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
-from _timing import median_time  # noqa: E402
+from _common import machine, median_time  # noqa: E402
 from scipy.interpolate import RegularGridInterpolator  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
@@ -229,8 +228,7 @@ def main():
               f"5000 {t_loop:.1f} s ({n_loop} run) -> {t_loop / t_grad:,.0f}x; lidarjax MC of "
               f"5000 {t_jax_mc * 1e3:.0f} ms; max |MC/u - 1| {worst:.2%}; nominal "
               f"agreement with numpy {max(agree.values()):.1e}", flush=True)
-    meta = {"machine": platform.processor() or platform.machine(), "cpus": len(
-        __import__("os").sched_getaffinity(0)), "jax": jax.__version__, "quick": args.quick,
+    meta = {"machine": machine(), "quick": args.quick,
             "std": STD, "nominal_tilt_deg": [PITCH, ROLL], "scan": "windcube_v2 28 deg",
             "probe": "point", "n_mc_equal_accuracy": N_MC}
     RESULTS.mkdir(exist_ok=True)

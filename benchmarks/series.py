@@ -29,14 +29,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _common import machine, machine_line  # noqa: E402
 from scipy.interpolate import RegularGridInterpolator
 
 import lidarjax
@@ -193,8 +192,7 @@ def main():
     # numpy and the spectral model use the same
     probe = probe_for_field(make_field(vel, spacing, jnp.float64), scan, np.append(heights, 216.0),
                             lidarjax.PulsedProbe())
-    results = {"machine": f"{platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, "
-                          f"{jax.devices()[0].platform}",
+    results = {"machine": machine(),
                "setup": {"scan": "windcube_v2", "probe": f"PulsedProbe({probe.n_nodes} nodes)",
                          "heights": heights.tolist(), "box_shape": shape, "box_spacing": spacing,
                          "U": U, "los_per_record": 600,
@@ -351,7 +349,7 @@ def write_md(path, r):
     s32, s64 = r["lidarjax"]["float32"], r["lidarjax"]["float64"]
     a = r["accuracy"]
     lines = [f"Windcube V2, {r['setup']['probe']}, 12 heights, 600 LOS per 10-minute record "
-             f"({r['setup']['field_samples_per_record']} field samples), {r['machine']}", "",
+             f"({r['setup']['field_samples_per_record']} field samples), {machine_line(r['machine'])}", "",
              "| implementation | records/s | speed-up | one year (52,560 records) |",
              "|---|---|---|---|",
              f"| numpy/scipy (RegularGridInterpolator) | {1 / r['numpy_seconds_per_record']:.2f} | 1 | "

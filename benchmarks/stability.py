@@ -38,8 +38,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -53,6 +51,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _common import machine, machine_line  # noqa: E402
 from scipy import stats  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
@@ -500,9 +499,7 @@ def main():
     parser.add_argument("--quick", action="store_true", help="fewer samples (under a minute)")
     quick = parser.parse_args().quick
     t0 = time.perf_counter()
-    out = dict(quick=quick, machine=dict(
-        platform=platform.platform(), cpus=os.cpu_count(), jax=jax.__version__,
-        jax_backend=jax.default_backend(), lidarjax=lj.__version__))
+    out = dict(quick=quick, machine=machine(), lidarjax=lj.__version__)
     for key, fn in (("conditioning", conditioning), ("speed", speed_sweep),
                     ("offset", offset_sweep), ("gradients", gradients),
                     ("inverse", inverse_cases)):
@@ -527,7 +524,7 @@ def g(x, fmt=".1e"):
 def markdown(out):
     lines = [f"# lidarjax numerical stability{' (quick)' if out['quick'] else ''}", ""]
     m = out["machine"]
-    lines += [f"{m['cpus']} CPUs ({m['platform']}), JAX {m['jax']} on {m['jax_backend']}; "
+    lines += [f"{machine_line(m)}; "
               f"{out['seconds']:.0f} s in all.", ""]
     c = out["conditioning"]
     lines += ["## Condition number against cone angle", "",

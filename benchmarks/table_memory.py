@@ -24,6 +24,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from _common import machine  # noqa: E402
+
 CHILD = r"""
 import os, sys, threading, time
 import jax
@@ -102,7 +104,7 @@ def main() -> None:
                       f"(+{peak - base:6.0f} MB while building the table)")
     res = Path(__file__).parent / "results"
     res.mkdir(exist_ok=True)
-    (res / "table_memory.json").write_text(json.dumps(rows, indent=1))
+    (res / "table_memory.json").write_text(json.dumps({"machine": machine(), "rows": rows}, indent=1))
     lines = ["| runs | run size (MB) | streamed: extra peak (MB) | all-at-once: extra peak (MB) |",
              "|---:|---:|---:|---:|"]
     for r in runs:
@@ -136,6 +138,7 @@ def plot(rows, path) -> None:
 if __name__ == "__main__":
     if sys.argv[1:] == ["--plot-only"]:
         res = Path(__file__).parent / "results"
-        plot(json.loads((res / "table_memory.json").read_text()), res / "table_memory.png")
+        saved = json.loads((res / "table_memory.json").read_text())
+        plot(saved["rows"] if isinstance(saved, dict) else saved, res / "table_memory.png")
     else:
         main()

@@ -38,6 +38,7 @@ jax.config.update("jax_enable_x64", True)
 import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from _common import machine  # noqa: E402
 
 import lidarjax as lj  # noqa: E402
 from lidarjax import spectral  # noqa: E402
@@ -139,6 +140,7 @@ def main(quick: bool) -> None:
                    boxes=n_boxes, lateral_positions=len(y_positions), record_s=record,
                    samples_per_record=n_times, quick=quick),
         seconds=dict(simulation=t_sim, model=t_model),
+        machine=machine(),
         rows=rows,
     )
     RESULTS.mkdir(exist_ok=True)

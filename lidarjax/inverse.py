@@ -46,16 +46,18 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from ._backend import CPU_BATCH, bucket, default_batch
 from ._precision import default_float, is_concrete
 from .flags import InverseFlag
 from .response import PeriodicSpline, ResponseTable, locate
 
 __all__ = ["Inversion", "invert", "invert_reconstructed", "default_solver"]
 
-#: Default number of problems (record-heights) solved together in one vmapped batch (rounded
-#: down to whole records). Small batches waste little on their slowest member; measured best
-#: on CPU between 256 and 1024 (benchmarks/inverse.py).
-DEFAULT_BATCH_SIZE = 512
+#: Problems (record-heights) per vmapped batch on a CPU (rounded down to whole records), the
+#: default there. Small batches waste little on their slowest member; measured best on CPU
+#: between 256 and 1024 (benchmarks/inverse.py). On an accelerator the default is the whole
+#: campaign when it fits in memory (`lidarjax._backend.default_batch`).
+DEFAULT_BATCH_SIZE = CPU_BATCH["invert"]
 
 
 class Inversion(eqx.Module):
@@ -270,35 +272,58 @@ def _solve_batch(los, w, noise, values, knots, geom, coefficients, cfg):
 
 
 @eqx.filter_jit
-def _invert_core(spline, values, knots, valid, los, weights, noise, cfg, batch_size):
-    *batch, h, b = los.shape
-    n = int(np.prod(batch, dtype=np.int64))
-    los_r = los.reshape(n, h, b)
-    w_r = (weights * valid).reshape(n, h, b)
-    noise_r = noise.reshape(n, h)
+def _invert_core(spline, values, knots, valid, los, weights, noise, cfg, per_batch):
+    """Records ``los`` ``(n, h, b)`` (weights alike, noise ``(n, h)``), solved in batches of
+    `per_batch` records (None: all at once), returned as an `Inversion` of ``(n, h)``."""
+    n, h, b = los.shape
+    w_r = weights * valid
     values = jnp.where(valid, values, 0.0)
     geom = (spline.start, spline.offsets, spline.widths, spline.uniform)
 
     def run(x):
         return _solve_batch(*x, values, knots, geom, spline.coefficients, cfg)
 
-    per_batch = n if batch_size is None else max(1, batch_size // h)
-    if n <= per_batch:
-        out = run((los_r, w_r, noise_r))
+    if per_batch is None or n <= per_batch:
+        out = run((los, w_r, noise))
     else:
         pad = (-n) % per_batch
         xs = (
-            jnp.concatenate([los_r, jnp.zeros((pad, h, b), los.dtype)]),
+            jnp.concatenate([los, jnp.zeros((pad, h, b), los.dtype)]),
             jnp.concatenate([w_r, jnp.zeros((pad, h, b), w_r.dtype)]),
-            jnp.concatenate([noise_r, jnp.full((pad, h), jnp.nan, noise_r.dtype)]),
+            jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)]),
         )
         xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
         out = jax.lax.map(run, xs)
         out = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:])[:n], out)
-    out = jax.tree_util.tree_map(lambda x: x.reshape(tuple(batch) + x.shape[1:]), out)
     return Inversion(**out)
 
 
+def _problem_bytes(h, b, n_directions, itemsize):
+    """A generous estimate of the memory one record-height problem needs while it is solved
+    (its LOS and weights, the start's per-direction costs, the solver's state)."""
+    return itemsize * (32 * b + 8 * n_directions + 256)
+
+
+def _batching(batch_size, n, h, b, n_directions, itemsize, fname):
+    """``(per_batch, n_pad)``: records per vmapped batch (None: one batch) and the padded
+    record count, a `bucket` (so campaigns of different lengths share few compilations)."""
+    if batch_size is None:
+        problems = default_batch("invert", _problem_bytes(h, b, n_directions, itemsize), n * h)
+    elif isinstance(batch_size, str):
+        if batch_size != "all":
+            raise ValueError(f"{fname}: `batch_size` must be a positive int, 'all' or None "
+                             f"(chosen per backend), got {batch_size!r}.")
+        problems = None
+    else:
+        if isinstance(batch_size, bool) or int(batch_size) != batch_size or int(batch_size) < 1:
+            raise ValueError(f"{fname}: `batch_size` must be a positive int, 'all' or None "
+                             f"(chosen per backend), got {batch_size!r}.")
+        problems = int(batch_size)
+    per_batch = None if problems is None else max(1, problems // h)
+    if per_batch is None or n <= per_batch:
+        n_pad = bucket(n) if per_batch is None else min(bucket(n), per_batch)
+        return None, max(n_pad, n)
+    return per_batch, bucket(-(-n // per_batch)) * per_batch
 def _cast_floats(tree, dtype):
     return jax.tree_util.tree_map(
         lambda a: a.astype(dtype)
@@ -348,16 +373,25 @@ def _run(spline, values, knots, valid, los, weights, noise, *, min_beams, max_st
         )
     if int(max_steps) < 1:
         raise ValueError(f"{fname}: `max_steps` must be positive, got {max_steps}.")
-    if batch_size is not None and int(batch_size) < 1:
-        raise ValueError(f"{fname}: `batch_size` must be positive or None, got {batch_size}.")
     if solver is None:
         solver = default_solver(dtype)
     spline, values, knots = _cast_floats((spline, values, knots), dtype)
     cfg = (solver, int(max_steps), int(min_beams))
-    return _invert_core(
-        spline, values, knots, valid, los, weights, noise, cfg,
-        None if batch_size is None else int(batch_size),
-    )
+    *batch, h, b = shape
+    n = int(np.prod(batch, dtype=np.int64))
+    per_batch, n_pad = _batching(batch_size, n, h, b, values.shape[0], np.dtype(dtype).itemsize,
+                                 fname)
+    los, weights, noise = los.reshape(n, h, b), weights.reshape(n, h, b), noise.reshape(n, h)
+    if not is_concrete(los, weights, noise):
+        n_pad = n  # inside a transformation the caller's compilation fixes the shapes anyway
+    if n_pad > n:  # dummy records (no usable beam: solved trivially), dropped below
+        los = jnp.concatenate([los, jnp.zeros((n_pad - n, h, b), dtype)])
+        weights = jnp.concatenate([weights, jnp.zeros((n_pad - n, h, b), dtype)])
+        noise = jnp.concatenate([noise, jnp.full((n_pad - n, h), jnp.nan, dtype)])
+    out = _invert_core(spline, values, knots, valid, los, weights, noise, cfg, per_batch)
+    if n_pad > n:
+        out = jax.tree_util.tree_map(lambda x: x[:n], out)
+    return jax.tree_util.tree_map(lambda x: x.reshape(tuple(batch) + x.shape[1:]), out)
 
 
 def invert(
@@ -369,7 +403,7 @@ def invert(
     min_beams: int = 3,
     max_steps: int = 32,
     solver: optx.AbstractLeastSquaresSolver | None = None,
-    batch_size: int | None = DEFAULT_BATCH_SIZE,
+    batch_size: int | str | None = None,
 ) -> Inversion:
     """Free-stream speed and direction from raw LOS records, per record and height.
 
@@ -391,7 +425,17 @@ def invert(
       problem is solved in units of the record's RMS LOS.
     - `batch_size`: problems (record-heights) per vmapped batch, rounded down to whole
       records; batches run one after another, which bounds memory for large campaigns, and
-      each runs only as many steps as its slowest member. None solves everything at once.
+      each runs only as many steps as its slowest member. None (default) chooses per backend
+      (`lidarjax._backend.default_batch`): `DEFAULT_BATCH_SIZE` (512) on a CPU; on a GPU or
+      TPU the whole campaign at once when it fits in a quarter of the free device memory
+      (else the largest batch that does). ``"all"`` solves everything at once. (Up to
+      lidarjax 0.1.0, None meant all at once; pass ``"all"`` for that now.)
+
+    **Compilations.** Outside `jax.jit`, the records (all leading axes together) are padded
+    with dummy records, whose results are dropped, up to a bucket of 1, 2, 3, 4, 6, 8, 12,
+    ... records, or batches when there are several: files of different lengths share a
+    handful of compilations, and padding never changes a result (every problem is solved
+    independently). Inside a transformation the caller's shapes are used as they are.
 
     **Returns:** an `Inversion` whose arrays are shaped ``(..., h)``, in the dtype of `los`
     (float32 input gives float32 results).
@@ -426,7 +470,7 @@ def invert_reconstructed(
     noise: Float[ArrayLike, "... h"] | None = None,
     max_steps: int = 32,
     solver: optx.AbstractLeastSquaresSolver | None = None,
-    batch_size: int | None = DEFAULT_BATCH_SIZE,
+    batch_size: int | str | None = None,
 ) -> Inversion:
     """Free-stream speed and direction from the instrument's reconstructed records
     (``.sta``-style horizontal speed and direction per height).

@@ -1,15 +1,24 @@
-"""How the lidar sits in the CFD frame: location, the seed's four angles and the tilt."""
+"""How the lidar sits in the CFD frame: location, the seed's four angles and the tilt.
+
+A `Mount` is one installation, or a batch of ``s`` of them along a leading axis (location
+``(s, 3)``, every angle ``(s,)``): the stacked form `lidarjax.simulate_rotations` and
+`lidarjax.sensitivity` map over, built in one call from arrays (e.g. 10,000 platform
+rotations ``Mount(location, beta=np.linspace(0, 360, 10_000))``).
+"""
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import default_float, is_concrete, split
+from ._precision import is_concrete, split
 
 __all__ = ["Mount"]
+
+_ANGLES = ("beta", "gamma", "psi", "epsilon", "pitch", "roll")
 
 
 class Mount(eqx.Module):
@@ -17,9 +26,10 @@ class Mount(eqx.Module):
 
     **Arguments:**
 
-    - `location`: ``(3,)`` lidar position (beam origin) in CFD coordinates, metres. Concrete
-      inputs are kept to float64 accuracy even in float32 (as a rounded value plus residual),
-      so UTM-sized coordinates work in float32.
+    - `location`: ``(3,)`` lidar position (beam origin) in CFD coordinates, metres; or
+      ``(s, 3)``, one per mount of a batch of ``s`` (below). Concrete inputs are kept to
+      float64 accuracy even in float32 (as a rounded value plus residual, `location` and
+      `location_lo`), so UTM-sized coordinates work in float32.
     - `beta`: platform rotation relative to the CFD axes (the seed's beta: the angle between
       the free-stream wind vector and the rig), degrees.
     - `gamma`: angle between the lidar and the rig (platform), degrees.
@@ -41,55 +51,122 @@ class Mount(eqx.Module):
       ``pitch = -90`` points the instrument axis along the lidar's ``+y`` (then ``heights``
       are distances along that axis).
 
+    **Batches.** Each angle may be one number or ``(s,)``, and `location` ``(3,)`` or
+    ``(s, 3)``. When any argument carries the batch axis, the others are broadcast to it:
+    the Mount stores `location` and `location_lo` ``(s, 3)`` and every angle ``(s,)`` (the
+    stacked form that `lidarjax.simulate_rotations`, `lidarjax.sensitivity` and
+    `lidarjax.scan_bounds` take, and that `lidarjax.stack_mounts` builds from single
+    mounts). `batch_shape` is ``()`` for one mount and ``(s,)`` for a batch; ``mount[k]`` is
+    the ``k``-th mount (a slice gives a smaller batch) and ``list(mount)`` all of them.
+    A batch is not a mount for `lidarjax.simulate` (use `lidarjax.simulate_rotations`, or
+    `jax.vmap`).
+
+    Raises `ValueError` (before any compilation) for a location not ``(3,)`` or ``(s, 3)``,
+    an angle with more than one axis, batch sizes that differ, an empty batch, and, for
+    concrete inputs, non-finite numbers.
+
     See `lidarjax.frames` for the chain these angles define.
     """
 
-    location: Float[Array, 3]
-    location_lo: Float[Array, 3]
-    beta: Float[Array, ""]
-    gamma: Float[Array, ""]
-    psi: Float[Array, ""]
-    epsilon: Float[Array, ""]
-    pitch: Float[Array, ""]
-    roll: Float[Array, ""]
+    location: Float[Array, "*s 3"]
+    location_lo: Float[Array, "*s 3"]
+    beta: Float[Array, "*s"]
+    gamma: Float[Array, "*s"]
+    psi: Float[Array, "*s"]
+    epsilon: Float[Array, "*s"]
+    pitch: Float[Array, "*s"]
+    roll: Float[Array, "*s"]
 
     def __init__(
         self,
-        location: Float[ArrayLike, 3],
-        beta: Float[ArrayLike, ""] = 0.0,
-        gamma: Float[ArrayLike, ""] = 0.0,
-        psi: Float[ArrayLike, ""] = 0.0,
-        epsilon: Float[ArrayLike, ""] = 0.0,
-        pitch: Float[ArrayLike, ""] = 0.0,
-        roll: Float[ArrayLike, ""] = 0.0,
+        location: Float[ArrayLike, "*s 3"],
+        beta: Float[ArrayLike, "*s"] = 0.0,
+        gamma: Float[ArrayLike, "*s"] = 0.0,
+        psi: Float[ArrayLike, "*s"] = 0.0,
+        epsilon: Float[ArrayLike, "*s"] = 0.0,
+        pitch: Float[ArrayLike, "*s"] = 0.0,
+        roll: Float[ArrayLike, "*s"] = 0.0,
     ):
         angles = {"beta": beta, "gamma": gamma, "psi": psi, "epsilon": epsilon,
                   "pitch": pitch, "roll": roll}
+        shape = np.shape(location)
+        if len(shape) not in (1, 2) or shape[-1] != 3:
+            raise ValueError(
+                f"Mount: `location` must be (x, y, z) in CFD metres, shape (3,), or (s, 3) for "
+                f"a batch of s mounts; got shape {shape}."
+            )
+        sizes = {"location": shape[0]} if len(shape) == 2 else {}
+        for name, val in angles.items():
+            a_shape = np.shape(val)
+            if len(a_shape) > 1:
+                raise ValueError(
+                    f"Mount: `{name}` must be one angle in degrees or (s,), one per mount of a "
+                    f"batch; got shape {a_shape}."
+                )
+            if a_shape:
+                sizes[name] = a_shape[0]
+        if len(set(sizes.values())) > 1:
+            raise ValueError(
+                f"Mount: batch sizes differ ({sizes}); give each batched argument one value per "
+                f"mount, or a single value shared by all."
+            )
+        n = next(iter(sizes.values())) if sizes else None
+        if n == 0:
+            raise ValueError("Mount: an empty batch (s = 0); give at least one mount.")
         if is_concrete(location, *angles.values()):
             loc = np.asarray(location, dtype=np.float64)
-            if loc.shape != (3,):
-                raise ValueError(
-                    f"Mount: `location` must be (x, y, z) in CFD metres, shape (3,); got "
-                    f"shape {loc.shape}."
-                )
             if not np.all(np.isfinite(loc)):
-                raise ValueError(f"Mount: `location` must be finite, got {loc.tolist()}.")
+                if loc.ndim == 1:
+                    raise ValueError(f"Mount: `location` must be finite, got {loc.tolist()}.")
+                k = int(np.argmax(~np.all(np.isfinite(loc), axis=-1)))
+                raise ValueError(f"Mount: `location` must be finite; mount {k} has "
+                                 f"{loc[k].tolist()}.")
             for name, val in angles.items():
                 a = np.asarray(val, dtype=np.float64)
-                if a.shape != () or not np.isfinite(a):
+                if a.ndim == 0 and not np.isfinite(a):
                     raise ValueError(
-                        f"Mount: `{name}` must be one finite angle in degrees, got {val!r}."
-                    )
-        dtype = _dtype_of(location)
-        self.location, self.location_lo = split(location, dtype)
-        self.beta, self.gamma, self.psi, self.epsilon, self.pitch, self.roll = (
-            jnp.asarray(a, dtype=_dtype_of(a)) for a in angles.values()
-        )
+                        f"Mount: `{name}` must be a finite angle in degrees, got {val!r}.")
+                if a.ndim == 1 and not np.all(np.isfinite(a)):
+                    k = int(np.argmax(~np.isfinite(a)))
+                    raise ValueError(f"Mount: `{name}` must be finite angles in degrees; mount "
+                                     f"{k} has {a[k]}.")
+        hi, lo = split(location, _dtype_of(location))
+        if n is not None and hi.ndim == 1:
+            hi, lo = jnp.broadcast_to(hi, (n, 3)), jnp.broadcast_to(lo, (n, 3))
+        self.location, self.location_lo = hi, lo
+        for name, val in angles.items():
+            a = jnp.asarray(val, dtype=_dtype_of(val))
+            if n is not None and a.ndim == 0:
+                a = jnp.broadcast_to(a, (n,))
+            setattr(self, name, a)
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """``()`` for one mount, ``(s,)`` for a batch of ``s``."""
+        return tuple(self.location.shape[:-1])
+
+    @property
+    def n_mounts(self) -> int:
+        """How many mounts: ``s`` for a batch, 1 for one mount."""
+        return int(np.prod(self.batch_shape, dtype=np.int64))
+
+    def __getitem__(self, index) -> Mount:
+        """The ``index``-th mount of a batch (a slice or index array: a smaller batch)."""
+        if not self.batch_shape:
+            raise TypeError(
+                "Mount: this is one mount, not a batch; only a batched Mount (location (s, 3)) "
+                "can be indexed."
+            )
+        if isinstance(index, int | np.integer):
+            s = self.batch_shape[0]
+            if not -s <= int(index) < s:
+                raise IndexError(f"Mount: index {int(index)} out of range for {s} mounts.")
+        return jax.tree_util.tree_map(lambda x: x[index], self)
 
 
 def _dtype_of(value):
     """Keep a JAX/numpy float input's dtype; Python numbers get the default float."""
     dt = getattr(value, "dtype", None)
     if dt is not None and jnp.issubdtype(dt, jnp.floating):
-        return dt if dt != np.float64 else default_float()
-    return default_float()
+        return jax.dtypes.canonicalize_dtype(dt)
+    return jax.dtypes.canonicalize_dtype(np.float64)

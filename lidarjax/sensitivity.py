@@ -51,8 +51,8 @@ wrapped to ``(-180, 180]``. Units of ``jacobian[out][..., i]`` are ``unit(out) p
 unit(input i)``: m/s per m, m/s per degree, degrees per degree, ...
 
 Batches: like `lidarjax.simulate_rotations`, `field` may be a list (or stack) of fields and
-`mount` a list (or stack) of mounts, ``u_ref`` ``(s, 3)``; every result then carries the
-sector axis ``s`` first.
+`mount` a batched `lidarjax.Mount` (e.g. ``Mount(location, beta=betas)``) or a list of
+mounts, ``u_ref`` ``(s, 3)``; every result then carries the sector axis ``s`` first.
 """
 
 from __future__ import annotations
@@ -66,6 +66,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._backend import default_batch
 from .angles import heading, horizontal_speed, wind_direction, wrap180
 from .batch import _is_stacked, _n_stacked, rotation_arguments, unstack_field
 from .corrections import DEFAULT_RATIO_TOL
@@ -324,7 +325,7 @@ def _prepare(fname, field, scan, mount, heights, u_ref, probe, names, outputs, i
     field_axis, mount_axis, uref_axis = axes
     n_sectors = next(iter(given.values())) if given else None
     first_field = unstack_field(field, 0) if field_axis == 0 else field
-    first_mount = mount if mount_axis is None else jax.tree_util.tree_map(lambda x: x[0], mount)
+    first_mount = mount if mount_axis is None else mount[0]
     heights = heights.astype(first_field.dtype)
 
     # names and outputs
@@ -462,10 +463,11 @@ def sensitivity(
     **Arguments:**
 
     - `field`, `scan`, `mount`, `heights`, `u_ref`, `probe`, `ratio_tol`: as for
-      `lidarjax.simulate`; `field` and `mount` may also be lists or stacks of one per sector
-      and `u_ref` ``(s, 3)``, as for `lidarjax.simulate_rotations`. Without `u_ref`, a scene
-      with its own ``speed`` and ``direction`` (uniform, hemisphere, hill) supplies its free
-      stream ``speed * heading(direction)``.
+      `lidarjax.simulate`; `field` may also be a list or stack of one per sector, `mount` a
+      batched `Mount` or a list, and `u_ref` ``(s, 3)``, as for
+      `lidarjax.simulate_rotations`. Without `u_ref`, a scene with its own ``speed`` and
+      ``direction`` (uniform, hemisphere, hill) supplies its free stream
+      ``speed * heading(direction)``.
     - `wrt`: input names (module docs): ``location`` (= ``x, y, z``), ``beta``, ``gamma``,
       ``psi``, ``epsilon``, ``pitch``, ``roll``, ``cone_angle``, ``heights``, ``speed``,
       ``direction``, ``scene.NAME[...]``.
@@ -645,7 +647,7 @@ def _mc_stats(samples, nominal, name):
 
 def _inverse_fn(table):
     def inv(los):  # (..., h, b) -> dict of (..., h)
-        r = invert(table, los, batch_size=None)
+        r = invert(table, los, batch_size="all")
         return {"inv_speed": r.speed, "inv_direction": r.direction}
 
     return inv
@@ -750,7 +752,7 @@ def _sector_count(field, mount, u_ref, axes):
     if field_axis == 0:
         return _n_stacked(field)
     if mount_axis == 0:
-        return mount.location.shape[0]
+        return mount.batch_shape[0]
     return u_ref.shape[0]
 
 
@@ -769,7 +771,7 @@ def uncertainty(
     noise: float = 0.0,
     n_monte_carlo: int = 0,
     key: jax.Array | int | None = None,
-    mc_batch_size: int = 256,
+    mc_batch_size: int | None = None,
     second_order: bool = False,
     ratio_tol: float = DEFAULT_RATIO_TOL,
 ) -> Budget:
@@ -794,7 +796,8 @@ def uncertainty(
       between beams; it enters the inverse outputs).
     - `n_monte_carlo`: with ``n > 0``, the same forward function (and inverse) is evaluated for
       `n` samples of the inputs drawn from ``N(nominal, C)`` (plus LOS noise for the
-      inverse), vmapped in chunks of `mc_batch_size`, and `Budget.mc_std` and
+      inverse), vmapped in chunks of `mc_batch_size` samples (None: chosen per backend,
+      256 on a CPU, all at once on a GPU when they fit in memory), and `Budget.mc_std` and
       `Budget.mc_relative_difference` report how far the linear propagation is off. The
       relative standard error of a Monte Carlo standard deviation is about
       ``1 / sqrt(2 (n - 1))``: 1 % needs about 5000 samples.
@@ -839,8 +842,8 @@ def uncertainty(
         outputs = _default_outputs(field, u_ref) + (_INVERSE_OUTPUTS if table is not None else ())
     outputs = tuple([outputs] if isinstance(outputs, str) else outputs)
     (field, scan, mount, heights, u_ref, probe, infer, point_reference, axes,
-     _) = _prepare(fname, field, scan, mount, heights, u_ref, probe, names, outputs,
-                   inverse=table is not None)
+     n_sectors) = _prepare(fname, field, scan, mount, heights, u_ref, probe, names, outputs,
+                           inverse=table is not None)
     inverse = any(o in _INVERSE_OUTPUTS for o in outputs)
     if second_order and inverse:
         raise ValueError(f"{fname}: second_order=True is for the forward outputs; leave the "
@@ -856,8 +859,15 @@ def uncertainty(
     n_mc = int(n_monte_carlo)
     if n_mc < 0 or n_mc == 1:
         raise ValueError(f"{fname}: `n_monte_carlo` must be 0 or at least 2, got {n_monte_carlo}.")
-    if int(mc_batch_size) < 1:
-        raise ValueError(f"{fname}: `mc_batch_size` must be positive, got {mc_batch_size}.")
+    if mc_batch_size is None:
+        # a generous estimate of one sample's forward run, over all sectors at once
+        per_sample = (np.dtype(heights.dtype).itemsize * (n_sectors or 1) * heights.shape[0]
+                      * scan.n_beams * int(getattr(probe, "n_nodes", 1)) * 256)
+        mc_batch_size = default_batch("monte_carlo", per_sample, max(n_mc, 1))
+    elif isinstance(mc_batch_size, bool) or int(mc_batch_size) != mc_batch_size \
+            or int(mc_batch_size) < 1:
+        raise ValueError(f"{fname}: `mc_batch_size` must be a positive int or None (chosen per "
+                         f"backend), got {mc_batch_size!r}.")
     if key is None:
         key = jax.random.PRNGKey(0)
     elif isinstance(key, int | np.integer):

@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._backend import CPU_BATCH, default_batch
 from ._deprecated import deprecated_getattr
 from ._precision import difference
 from .angles import horizontal_speed, wind_direction
@@ -522,7 +523,7 @@ def simulate_statistics(
     motion: AbstractMotion | None = None,
     point_dt: float = 1.0,
     ensemble: bool = False,
-    chunk: int = 64,
+    chunk: int | None = None,
     shard: bool = True,
     refine_probe: bool = True,
 ) -> SeriesStatistics:
@@ -539,7 +540,11 @@ def simulate_statistics(
     - `ensemble`: `field` is a stack of ``e`` fields (`lidarjax.stack_fields`: every array
       leaf has a leading axis ``e``); the result gets a leading ``e`` axis;
     - `chunk`: records per compiled batch (vmapped); memory grows with ``chunk`` (and ``e``),
-      not with ``r``;
+      not with ``r``. None (default) chooses per backend (`lidarjax._backend.default_batch`):
+      64 on a CPU; on a GPU or TPU all records at once (padded to a bucket of 1, 2, 3, 4, 6,
+      8, 12, ... so that few lengths compile) when they fit in a quarter of the free device
+      memory, else the largest chunk that does; with a float32 field that is advanced per
+      chunk (below), at most ``2**16`` s of records (or 64 records) per chunk;
     - `shard`: spread each chunk's records over all local devices (`jax.sharding`,
       a 1-D mesh over `jax.devices()`); the chunk is padded to a multiple of the device
       count. One device: no sharding.
@@ -574,6 +579,15 @@ def simulate_statistics(
     order = tuple(int(i) for i in schedule.order())
     devices = jax.devices()
     n_dev = len(devices) if shard else 1
+    rebase = motion is None and not ensemble and hasattr(field, "advanced")
+    if chunk is None:
+        n_nodes = int(getattr(probe, "n_nodes", 1))
+        n_ens = jax.tree_util.tree_leaves(field)[0].shape[0] if ensemble else 1
+        per_record = (np.dtype(dtype).itemsize * n_ens * n_cycles * len(order)
+                      * heights.shape[0] * n_nodes * 64)
+        chunk = default_batch("statistics", per_record / n_dev, starts.size)
+        if rebase and np.dtype(dtype).itemsize < 8:  # keep float32 times fine within a chunk
+            chunk = min(chunk, max(int(2.0**16 // float(record_length)), CPU_BATCH["statistics"]))
     chunk = max(int(chunk), 1)
     chunk = -(-chunk // n_dev) * n_dev
     fn = _record_stats_fn(n_cycles, n_points, order, float(record_length), ensemble,
@@ -585,7 +599,6 @@ def simulate_statistics(
     # Float32 times far from 0 are coarse (ulp(3e7 s) = 2 s). A field that can move its own
     # clock on the host in float64 (`FrozenTurbulence.advanced`) is advanced to each chunk's
     # first start and sees times relative to it (a chunk spans chunk * record_length).
-    rebase = motion is None and not ensemble and hasattr(field, "advanced")
     out = []
     for i in range(0, starts.size, chunk):
         part = starts[i:i + chunk]

@@ -219,3 +219,22 @@ def hex_mesh(
         "face_labels": newp[faces_all.reshape(-1)], "owner": owner, "neighbour": neighbour,
         "patches": patches, "cell_centres": centres, "cell_index": cid,
     }
+
+
+def write_probes_output(path, locations, times_values, unset=()):
+    """OpenFOAM v1912 probes output, as `postProcess -func <name>` writes it (full
+    precision here so the round trip can be checked to rounding)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lines = []
+    for i, p in enumerate(locations.points):
+        tail = "  # Not Found" if i in unset else ""
+        lines.append(f"# Probe {i} ({p[0]:.17g} {p[1]:.17g} {p[2]:.17g}){tail}")
+    lines.append("#       Probe" + "".join(f"{i:>14d}" for i in range(len(locations))))
+    lines.append("#        Time")
+    for t, vals in times_values:
+        cells = []
+        for i, v in enumerate(vals):
+            v = (-1e300,) * 3 if i in unset else v
+            cells.append("(" + " ".join(f"{x:.17g}" for x in v) + ")")
+        lines.append(f"{t:>13g}             " + "             ".join(cells))
+    path.write_text("\n".join(lines) + "\n")

@@ -28,7 +28,7 @@ import lidarjax as lj
 PACKAGE = Path(lj.__file__).resolve().parent
 REPO = PACKAGE.parent
 
-HELPERS = {"lidarjax._util", "lidarjax._precision", "lidarjax._deprecated"}
+HELPERS = {"lidarjax._util", "lidarjax._precision", "lidarjax._deprecated", "lidarjax._backend"}
 #: Optional extras that a function may import where it needs them (heavy or absent).
 OPTIONAL = {"matplotlib", "xarray", "dask", "distributed", "floris", "meshio", "numba", "hipersim",
             "tqdm", "pandas", "h5netcdf", "h5py", "foamlib", "netCDF4"}
@@ -78,7 +78,7 @@ def _imports():
         tree = ast.parse(path.read_text())
         parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
 
-        def in_function(node):
+        def in_function(node, parents=parents):
             while node in parents:
                 node = parents[node]
                 if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):

@@ -18,41 +18,24 @@ every direction, and writes to ``--out``:
   hub centre (``<name>_hub``) and seed 004's reference point 1 D upstream at hub height
   (``<name>_ref1D``);
 - ``table.npz``: the response table (for ``lidarjax correct``).
+
+The study is `lidarjax.farm_study` and the files `lidarjax.write_farm_study`
+(`lidarjax.workflows.farm_study`); this module parses, validates the options and prints.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
-import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from .. import scan as scans
-from .._util import atomic_write_text
-from ..angles import heading
-from ..batch import simulate_rotations
-from ..disturbed_sectors import disturbed_sectors, in_sectors, merge_sectors
-from ..forward import simulate
 from ..io.layout import read_farm
-from ..io.monitor_points import (
-    MonitorPoints,
-    write_monitor_points_csv,
-    write_openfoam_probes,
-    write_zcfd_probes,
-)
-from ..io.tables import save_table
-from ..mount import Mount
-from ..plots import plot_farm_map, plot_roses
-from ..probe import CWProbe, PulsedProbe
-from ..response import ResponseTable
-from ..scenes.farm import nacelle_mount
-from ..workflows.monitor_points import monitor_points
+from ..workflows.farm_study import FARM_SCANS, check_lidar_position, farm_study, write_farm_study
 from ._common import finite_float, positive_float
 
-SCANS = ("windcube_v1", "windcube_v2", "zephir", "nacelle_2beam", "nacelle_4beam")
+SCANS = FARM_SCANS
 
 
 def _directions(text: str):
@@ -124,24 +107,6 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _check_lidar(lay, xyz) -> None:
-    d = np.hypot(lay.easting - xyz[0], lay.northing - xyz[1])
-    r = 0.5 * lay.diameter
-    inside = (d < r) & (xyz[2] > lay.hub_height - r - 1e-9) & (xyz[2] < lay.hub_height + r)
-    inside |= d < 0.5  # standing on the tower
-    if inside.any():
-        k = int(np.argmax(inside))
-        raise ValueError(f"the lidar at ({xyz[0]:g}, {xyz[1]:g}, {xyz[2]:g}) is inside turbine "
-                         f"{lay.names[k]}'s rotor ({d[k]:.1f} m from its tower, rotor radius "
-                         f"{r[k]:g} m, hub {lay.hub_height[k]:g} m)")
-    under = d < r
-    if under.any():
-        k = int(np.argmax(under))
-        raise ValueError(f"the lidar is inside turbine {lay.names[k]}'s rotor footprint "
-                         f"({d[k]:.1f} m from its tower, rotor radius {r[k]:g} m): its beams "
-                         f"would cross the blades")
-
-
 def run(args) -> int:
     lay = read_farm(args.layouts, args.turbine)
     names = list(lay.names)
@@ -150,16 +115,16 @@ def run(args) -> int:
         raise ValueError(f"--out {out} exists and is not a folder")
     if not (args.speed > 0 and np.isfinite(args.speed)):
         raise ValueError(f"--speed must be positive m/s, got {args.speed}")
-    yaw = np.zeros(len(names))
+    yaw = {}
     for item in args.yaw:
         name, _, value = item.partition("=")
         if name not in names:
             raise ValueError(f"--yaw {item!r}: no turbine named {name!r}")
         try:
-            yaw[names.index(name)] = float(value)
+            yaw[name] = float(value)
         except ValueError:
             raise ValueError(f"--yaw {item!r}: expected NAME=DEGREES") from None
-        if abs(yaw[names.index(name)]) >= 90:
+        if abs(yaw[name]) >= 90:
             raise ValueError(f"--yaw {item!r}: |yaw| must be below 90 degrees")
     nacelle = args.nacelle is not None
     if nacelle and args.nacelle not in names:
@@ -170,148 +135,22 @@ def run(args) -> int:
     if nacelle != scan_name.startswith("nacelle"):
         raise ValueError(f"--scan {scan_name} is a {'nacelle' if not nacelle else 'ground'} "
                          f"lidar; use {'--nacelle NAME' if not nacelle else 'a nacelle_* scan'}")
-    make = getattr(scans, scan_name)
-    scan = make() if args.cone_angle is None else make(args.cone_angle)
     if not nacelle:
-        _check_lidar(lay, args.lidar)
-    k_nac = names.index(args.nacelle) if nacelle else None
-    if args.heights is None:
-        heights = [2.5 * float(lay.diameter[k_nac])] if nacelle else [float(np.mean(lay.hub_height))]
-    else:
-        heights = args.heights
-    if not heights or any(not (h > 0) for h in heights):
-        raise ValueError(f"--heights must be positive metres, got {heights}")
-    probe = {"point": None, "pulsed": PulsedProbe(), "cw": CWProbe()}[args.probe]
+        check_lidar_position(lay, args.lidar)
+    if args.heights is not None and (not args.heights or any(not (h > 0) for h in args.heights)):
+        raise ValueError(f"--heights must be positive metres, got {args.heights}")
 
-    farm = lay.to_farm(speed=args.speed, direction=float(args.directions[0]), alpha=args.shear,
-                       model=args.model, combination=args.combination,
-                       expansion=args.expansion, yaw=yaw)
-    origin = np.asarray(farm.origin, np.float64) + np.asarray(farm.origin_lo, np.float64)
-    dirs = np.asarray(args.directions, np.float64)
-    hts = jnp.asarray(heights, farm.dtype)
-    ground = None if nacelle else Mount(np.asarray(args.lidar, np.float64))
-
-    def at(direction, yaw_deg=None):
-        f = eqx.tree_at(lambda g: g.direction, farm, jnp.asarray(direction, farm.dtype))
-        if yaw_deg is not None:
-            f = eqx.tree_at(lambda g: g.yaw, f, yaw_deg)
-        m = nacelle_mount(f, k_nac, backward=args.backward, north=True) if nacelle else ground
-        return f, m
-
-    def reading(direction, yaw_deg):
-        f, m = at(direction, yaw_deg)
-        return simulate(f, scan, m, hts, probe=probe, point_reference=False).lidar_speed[0]
-
-    run_dirs = dirs if args.map_direction is None else np.append(dirs, args.map_direction)
-    stacked = jax.vmap(lambda d: at(d)[0])(jnp.asarray(run_dirs, farm.dtype))
-    mounts = jax.vmap(lambda f: nacelle_mount(f, k_nac, backward=args.backward, north=True))(stacked) \
-        if nacelle else ground
-    u_refs = args.speed * np.stack([np.asarray(heading(d)) for d in run_dirs])
-    sims_all = simulate_rotations(stacked, scan, mounts, hts, u_refs=u_refs, probe=probe,
-                                point_reference=False)
-    sims = jax.tree_util.tree_map(lambda a: a[: dirs.size], sims_all)
-    grad_yaw = np.asarray(jax.jit(jax.vmap(jax.grad(reading, argnums=1), in_axes=(0, None)))(
-        jnp.asarray(dirs, farm.dtype), farm.yaw))
-
-    ratio = np.asarray(sims.cff_U, np.float64)
-    addend = np.asarray(sims.cff_th, np.float64)
-    speed = np.asarray(sims.lidar_speed, np.float64)
-    ldir = np.asarray(sims.lidar_direction, np.float64)
-
-    loc_xy = (np.asarray(farm.hub_points()[k_nac], np.float64)[:2] + origin[:2]) if nacelle \
-        else np.asarray(args.lidar[:2])
-    secs = disturbed_sectors(loc_xy, lay.easting, lay.northing, lay.diameter, names)
-    merged = merge_sectors(secs)
-    disturbed = in_sectors(dirs, merged)
-
-    out.mkdir(parents=True, exist_ok=True)
-    labels = [f"{h:g} m" for h in heights]
-    kind = f"nacelle lidar on {args.nacelle}" if nacelle else "ground lidar"
-    plot_roses(dirs, ratio, addend, labels, out / "roses.png", shade=merged,
-               title=f"{scan_name} {kind}, {args.model} wakes, {args.speed:g} m/s")
-
-    k_map = int(np.nanargmax(np.abs(ratio[:, 0] - 1.0))) if args.map_direction is None else None
-    map_dir = float(dirs[k_map]) if k_map is not None else float(args.map_direction)
-    f_map, m_map = at(map_dir)
-    pts_abs = np.asarray(sims_all.points[k_map if k_map is not None else -1], np.float64)  # (h, b, 3)
-    m_loc = np.asarray(m_map.location, np.float64) + np.asarray(m_map.location_lo, np.float64)
-    lidar_local = m_loc - origin
-    beams = np.stack([np.broadcast_to(lidar_local[:2], pts_abs[-1, :, :2].shape),
-                      pts_abs[-1, :, :2] - origin[:2]], 1)
-    plot_farm_map(f_map, float(np.mean(lay.hub_height)), out / "map.png", names=names,
-                  lidar=lidar_local[:2], beams=beams,
-                  title=f"{args.model} wakes from {map_dir:g} deg at hub height, {kind}")
-
-    def fmt(x):
-        return "" if not np.isfinite(x) else f"{x:.6g}"
-
-    head = ["direction_deg", "disturbed"]
-    for h in heights:
-        head += [f"lidar_speed_{h:g}m", f"lidar_direction_{h:g}m", f"speed_ratio_{h:g}m",
-                 f"direction_addend_{h:g}m"] + ([f"yaw_misalignment_{h:g}m"] if nacelle else [])
-    # a nacelle lidar reports (north=True) true directions; its yaw misalignment is the
-    # reported direction minus the bearing its axis points to (rotor heading, +180 backward)
-    axis = (dirs - yaw[k_nac] + (180.0 if args.backward else 0.0)) if nacelle else None
-    rows = [",".join(head)]
-    for i, d in enumerate(dirs):
-        row = [f"{d:g}", str(int(disturbed[i]))]
-        for j in range(len(heights)):
-            row += [fmt(speed[i, j]), fmt(ldir[i, j]), fmt(ratio[i, j]), fmt(addend[i, j])]
-            if nacelle:
-                row.append(fmt(float(np.mod(ldir[i, j] - axis[i] + 180.0, 360.0) - 180.0)))
-        rows.append(",".join(row))
-    meta = (f"# lidarjax farm: {kind} ({scan_name}), {args.model} wakes, {args.combination}, "
-            f"free stream {args.speed:g} m/s at hub height, shear {args.shear:g}; speed_ratio = "
-            f"free / lidar, direction_addend = free - lidar (deg); disturbed: IEC 61400-12-1 A\n")
-    atomic_write_text(out / "directions.csv", meta + "\n".join(rows) + "\n")
-
-    rows = ["direction_deg," + ",".join(names)]
-    rows += [f"{d:g}," + ",".join(f"{g:.6g}" for g in grad_yaw[i]) for i, d in enumerate(dirs)]
-    atomic_write_text(out / "yaw_gradient.csv",
-                      f"# d(lidar speed at {heights[0]:g} m)/d(yaw of each turbine), m/s per "
-                      f"degree (yaw positive anticlockwise seen from above)\n" + "\n".join(rows) + "\n")
-
-    rows = ["name,bearing_deg,distance_m,diameter_m,excluded_width_deg,considered,too_close"]
-    rows += [f"{s.name},{s.bearing:.3f},{s.distance:.2f},{s.diameter:g},{s.width:.3f},"
-             f"{int(s.considered)},{int(s.too_close)}" for s in secs]
-    rows += ["", "merged_start_deg,merged_end_deg"] + [f"{a:.3f},{b:.3f}" for a, b in merged]
-    atomic_write_text(out / "sectors.csv", "\n".join(rows) + "\n")
-
-    hub = np.asarray(f_map.hub_points(), np.float64) + origin
-    ref = np.asarray(f_map.reference_points(), np.float64) + origin
-    locs = farm_probe_locations(names, hub, ref, lay.hub_height, scan, m_map, heights, probe)
-    meta = {"direction_deg": map_dir, "rows": "lidar beam points (quadrature nodes with "
-            "--probe pulsed/cw), then turbine hub centres and seed 004 reference points 1 D "
-            "upstream at hub height (beam/node -3)"}
-    write_monitor_points_csv(out / "probes.csv", locs, metadata=meta)
-    write_openfoam_probes(out / "lidarProbes", locs, metadata=meta)
-    write_zcfd_probes(out / "lidarProbes_zcfd.py", locs, metadata=meta)
-    if dirs.size >= 3:
-        table = ResponseTable.from_simulations(sims, mount=None)
-        save_table(out / "table.npz", table, {"scan": scan_name, "layouts": list(args.layouts),
-                                              "model": args.model, "speed": args.speed})
-    n_dist = int(disturbed.sum())
-    top = int(np.argmax(np.abs(grad_yaw[k_map if k_map is not None else 0])))
-    print(f"farm: {len(names)} turbines, {dirs.size} directions ({n_dist} in disturbed sectors), "
-          f"{kind}; largest correction {np.nanmax(np.abs(ratio - 1)):.3f} at {map_dir:g} deg, "
-          f"where {names[top]}'s yaw moves the reading most -> {out}")
+    study = farm_study(
+        lay, lidar=args.lidar, nacelle=args.nacelle, backward=args.backward, scan=scan_name,
+        cone_angle=args.cone_angle, heights=args.heights, directions=args.directions,
+        speed=args.speed, shear=args.shear, model=args.model, combination=args.combination,
+        expansion=args.expansion, yaw=yaw, probe=args.probe, map_direction=args.map_direction)
+    study = dataclasses.replace(study, layouts=tuple(args.layouts))
+    write_farm_study(out, study)
+    n_dist = int(study.disturbed.sum())
+    top = int(np.argmax(np.abs(study.yaw_gradient[study.map_index or 0])))
+    print(f"farm: {len(names)} turbines, {study.directions.size} directions ({n_dist} in "
+          f"disturbed sectors), {study.kind}; largest correction {study.largest_correction:.3f} "
+          f"at {study.map_direction:g} deg, where {names[top]}'s yaw moves the reading most "
+          f"-> {out}")
     return 0
-
-
-def farm_probe_locations(names, hub, ref, hub_height, scan, mount, heights, probe):
-    """The lidar's probe points (`lidarjax.monitor_points`, label ``lidar``) followed by each
-    turbine's hub centre and reference point (absolute CFD metres) as one `MonitorPoints`;
-    turbine rows have ``beam = node = -3``, NaN beta and weight, height = hub height."""
-
-    lidar = monitor_points(scan, mount, np.asarray(heights, np.float64), probe,
-                            labels=["lidar"])
-    n = 2 * len(names)
-    turbines = MonitorPoints(
-        names=tuple(f"{x}_hub" for x in names) + tuple(f"{x}_ref1D" for x in names),
-        mount=("turbines",) * n, points=np.concatenate([hub, ref]),
-        beta=np.full(n, np.nan), height=np.tile(np.asarray(hub_height, np.float64), 2),
-        beam=np.full(n, -3), node=np.full(n, -3), weight=np.full(n, np.nan))
-    both = {f: (getattr(lidar, f) + getattr(turbines, f)) if f in ("names", "mount")
-            else np.concatenate([getattr(lidar, f), getattr(turbines, f)])
-            for f in ("names", "mount", "points", "beta", "height", "beam", "node", "weight")}
-    return MonitorPoints(**both)

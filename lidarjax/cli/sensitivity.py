@@ -1,26 +1,26 @@
 """`lidarjax sensitivity`: installation uncertainty budgets of a seed settings.dat's lidar,
-for every platform rotation in one compiled batch."""
+for every platform rotation in one compiled batch.
+
+The budgets are `lidarjax.sensitivity_report` and the files `lidarjax.write_sensitivity_report`
+(`lidarjax.workflows.sensitivity_report`); this module parses, validates and prints.
+"""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from .._util import have_module
-from ..io import read_settings, write_table_csv
-from ..io.fields import load_field
+from ..io import read_settings
 from ..io.seed_output import format_number
-from ..mount import Mount
-from ..plots import plot_budget, plot_sensitivity_profiles
-from ..scan import windcube_v1, windcube_v2, zephir
-from ..sensitivity import INPUTS, OUTPUTS, budget_columns, uncertainty
+from ..sensitivity import INPUTS, OUTPUTS
+from ..workflows.sensitivity_report import sensitivity_report, write_sensitivity_report
 from ._common import (
     add_run_arguments,
     field_paths,
     make_probe,
+    make_scan,
     positive_float,
     tilt_angle,
 )
@@ -117,55 +117,23 @@ def run(args) -> int:
     settings = read_settings(args.settings)
     betas = [float(b) for b in settings.betas]
     paths = field_paths(args, betas)
-    make = {"windcube_v1": windcube_v1, "windcube_v2": windcube_v2, "zephir": zephir}[args.scan]
-    kw = {"tilt_compensation": bool(args.tilt_compensation)}
-    scan = make(**kw) if args.cone_angle is None else make(args.cone_angle, **kw)
+    scan = make_scan(args.scan, args.cone_angle, tilt_compensation=bool(args.tilt_compensation))
     probe = make_probe(args)
-    out = __import__("pathlib").Path(args.out)
+    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    mounts = [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
-                    epsilon=settings.epsilon, pitch=args.pitch, roll=args.roll) for b in betas]
-    heights = jnp.asarray(settings.heights())
-    fields = [load_field(paths[b]) for b in betas]
-    budget = uncertainty(fields, scan, mounts, heights, std=std, u_ref=args.u_ref, probe=probe,
-                         outputs=outputs, n_monte_carlo=args.n_monte_carlo)
-    budget = jax.tree_util.tree_map(np.asarray, budget)
-    lidar_z = np.array([float(settings.location(b)[2]) for b in betas])
-    ref = args.ref_height if args.ref_height is not None else float(np.mean(lidar_z))
-    if not ref > 0:
-        ref = float(settings.height)
-    z_over_h = (lidar_z[:, None] + np.asarray(budget.heights)[None]) / ref
+    report = sensitivity_report(settings, [paths[b] for b in betas], std=std, betas=betas,
+                                scan=scan, probe=probe, u_ref=args.u_ref, outputs=outputs,
+                                pitch=args.pitch, roll=args.roll,
+                                n_monte_carlo=args.n_monte_carlo, ref_height=args.ref_height)
     for k, b in enumerate(betas):
         print(f"== beta = {b:g} deg ({paths[b].name}) ==")
-        print(budget.table(sector=k))
+        print(report.budget.table(sector=k))
         print()
     meta = {"settings": str(args.settings), "field": args.field, "scan": args.scan,
-            "probe": args.probe, "std": ";".join(f"{k}={v}" for k, v in std.items()),
-            "pitch_deg": args.pitch, "roll_deg": args.roll,
-            "tilt_compensation": bool(args.tilt_compensation), "ref_height_m": ref,
-            "u_ref_cfd_m_s": ",".join(map(str, args.u_ref)),
-            "method": "GUM law of propagation u^2 = J C J^T with exact forward-mode Jacobians"}
-    written = []
-    for o in outputs:
-        cols, units = budget_columns(budget, o, betas, z_over_h)
-        written.append(write_table_csv(out / f"budget_{o}.csv", cols, units, meta))
-    if not args.no_plots and have_module("matplotlib"):
-        # the budget figure of the platform rotation with the largest uncertainty
-        k = int(np.nanargmax(np.nanmax(budget.std[outputs[0]], axis=-1)))
-        written.append(plot_budget(
-            z_over_h[k], budget.inputs, {o: budget.contribution[o][k] for o in outputs},
-            {o: budget.std[o][k] for o in outputs}, {o: OUTPUTS[o] for o in outputs},
-            out / "budget.png",
-            title=f"uncertainty budget, beta = {betas[k]:g} deg (largest u({outputs[0]}))"))
-        written.append(plot_sensitivity_profiles(
-            z_over_h.mean(0), budget.inputs, {o: budget.jacobian[o] for o in outputs},
-            {(o, n): f"{OUTPUTS[o]} per {u}" for o in outputs
-             for n, u in zip(budget.inputs, budget.input_units, strict=True)},
-            out / "sensitivity_profiles.png",
-            title=f"sensitivity profiles over {len(betas)} platform rotations"))
-    worst = {o: float(np.nanmax(budget.std[o])) for o in outputs}
+            "probe": args.probe}
+    written = write_sensitivity_report(out, report, plots=not args.no_plots, metadata=meta)
     print("largest standard uncertainty over betas and heights: " + ", ".join(
-        f"{o} {v:.3g} {OUTPUTS[o]}" for o, v in worst.items()))
+        f"{o} {v:.3g} {OUTPUTS[o]}" for o, v in report.largest.items()))
     print(f"wrote {len(written)} file(s) to {out} (betas: "
           f"{', '.join(format_number(b) for b in betas)})")
     return 0

@@ -4,6 +4,8 @@
 - `seed_output`: the seed's output table, its azimuth convention, CSV and NetCDF writers.
 - `sta`, `rtd`: Windcube 10-minute statistics and line-of-sight records.
 - `zephir`: ZephIR 10-minute CSV exports.
+- `record_set`: `RecordSet`, the common record type every reader's result converts to
+  (`to_record_set()`), as `lidarjax.load_records` returns it.
 - `monitor_points`: the lidar's sample points as CFD monitor points (`MonitorPoints`) and their
   files (OpenFOAM ``probes`` dictionary and output, zCFD, CSV).
 - `fields`: CFD velocity fields (`.npz`, NetCDF, Fluent ASCII, OpenFOAM cases) for
@@ -54,6 +56,7 @@ from .openfoam import read_openfoam_field as read_openfoam_field
 from .openfoam import read_openfoam_mesh as read_openfoam_mesh
 from .openfoam import resample_openfoam as resample_openfoam
 from .openfoam import sample_openfoam as sample_openfoam
+from .record_set import RecordSet as RecordSet
 from .rtd import BEAM_AZIMUTHS as BEAM_AZIMUTHS
 from .rtd import InstrumentReconstruction as InstrumentReconstruction
 from .rtd import RtdBeams as RtdBeams

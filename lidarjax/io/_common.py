@@ -106,7 +106,7 @@ def parse_times(texts: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """
     iso = [_to_iso(t) for t in texts]
     ok = np.array([bool(_ISO_TIME.match(t)) for t in iso], dtype=bool)
-    out = np.full(len(iso), np.datetime64("NaT"), dtype="datetime64[ms]")
+    out = np.full(len(iso), np.datetime64("NaT", "ms"), dtype="datetime64[ms]")
     good = [t for t, g in zip(iso, ok, strict=True) if g]
     if good:
         try:

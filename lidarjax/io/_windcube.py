@@ -32,13 +32,15 @@ import datetime as _dt
 import io
 import re
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from .._util import file_error, normalise_key, require_file, summarise_lines
 from ..flags import RecordFlag
+from ..progress import progress_meter
 from ._common import offset_timedelta, parse_float, parse_times, parse_utc_offset, read_text
 
 __all__: list[str] = []
@@ -225,15 +227,21 @@ def read_windcube(
     what: str,
     *,
     gate_quantities: Mapping[str, str] | None = None,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Any = None,
 ) -> Parsed:
     """Read a Windcube text file; per-altitude columns named in `quantities` are mapped.
 
     `quantities` maps normalised quantity names (`normalise_key("Wind Speed (m/s)")` is
     `"windspeed"`) to record field names; `gate_quantities` maps lower-case V1 gate-column
-    prefixes (`"vhm"` for `Vhm1`) to field names. `progress(done, total)` is called per chunk.
+    prefixes (`"vhm"` for `Vhm1`) to field names. `progress` (`lidarjax.progress.progress_meter`:
+    a bool, a meter or a `(done, total)` callable; True: a `TextProgress` line
+    ``reading <file>: ...``) is told the rows parsed per chunk.
     """
     p = require_file(path, what)
+    if progress is None or progress is False:
+        progress = None
+    else:
+        progress = progress_meter(progress).callback(f"reading {p.name}")
     text = read_text(p)
     lines = text.split("\n")
     first = lines[0].rstrip("\r").lstrip("\ufeff")

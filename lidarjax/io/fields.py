@@ -52,6 +52,7 @@ from .._util import (
     require_file,
 )
 from ..field import GridField
+from ..progress import AbstractProgress, NoProgress, TqdmProgress, progress_meter
 from .openfoam import is_openfoam_case, read_openfoam_field, resample_openfoam
 from .vtk import read_vtk_field
 
@@ -384,16 +385,14 @@ def _parse_chunk(
     raise file_error(path, line_numbers[0], "could not parse this block of rows")
 
 
-def _progress_bar(total: int, enabled: bool, label: str) -> Any:
-    if enabled and have_module("tqdm"):
-        import tqdm
-
-        return tqdm.tqdm(total=total, unit="B", unit_scale=True, desc=label, leave=False)
-    return None
+def _default_meter() -> AbstractProgress:
+    """`progress=True` while reading a Fluent export: a tqdm bar if tqdm is installed,
+    silent otherwise."""
+    return TqdmProgress() if have_module("tqdm") else NoProgress()
 
 
 def read_fluent_points(
-    path: PathLike, *, progress: bool = False, chunk_rows: int = 200_000
+    path: PathLike, *, progress: bool | AbstractProgress = False, chunk_rows: int = 200_000
 ) -> tuple[Float[np.ndarray, "n 3"], Float[np.ndarray, "n 3"]]:
     """Read the scattered points of a Fluent ASCII export, streaming in chunks.
 
@@ -401,7 +400,8 @@ def read_fluent_points(
 
     - `path`: the export. First non-blank line: the column names (comma or whitespace
       separated; the six coordinate and velocity columns in any order, others ignored).
-    - `progress`: show a tqdm progress bar (if tqdm is installed; silent otherwise).
+    - `progress`: bytes read so far: ``True`` shows a tqdm bar (if tqdm is installed;
+      silent otherwise), or give a `lidarjax.progress` meter.
     - `chunk_rows`: rows parsed per `numpy.loadtxt` call (bounds the memory of text).
 
     **Returns:** `(points, velocity)`, each `(n, 3)` float64: CFD coordinates in metres and
@@ -414,7 +414,8 @@ def read_fluent_points(
         raise ValueError(f"chunk_rows must be >= 1, got {chunk_rows}")
     p = require_file(path, "Fluent export")
     blocks: list[np.ndarray] = []
-    bar = _progress_bar(p.stat().st_size, progress, p.name)
+    meter = progress_meter(progress, _default_meter)
+    bar = meter.start(p.stat().st_size, p.name, unit="B")
     try:
         with open(p, encoding="utf-8", errors="replace") as fh:
             number = 0
@@ -441,15 +442,12 @@ def read_fluent_points(
                 if len(lines) >= chunk_rows:
                     blocks.append(_parse_chunk(lines, numbers, delimiter, cols, p))
                     lines, numbers = [], []
-                    if bar is not None:
-                        bar.update(done - bar.n)
+                    meter.update(bar, done)
             if lines:
                 blocks.append(_parse_chunk(lines, numbers, delimiter, cols, p))
-            if bar is not None:
-                bar.update(done - bar.n)
+            meter.update(bar, done)
     finally:
-        if bar is not None:
-            bar.close()
+        meter.close(bar)
     if not blocks:
         raise file_error(p, None, "no data rows after the header")
     table = np.concatenate(blocks, axis=0)
@@ -634,7 +632,7 @@ def read_field_arrays(
     *,
     spacing: float | Sequence[float] | None = None,
     shape: Sequence[int] | None = None,
-    progress: bool = False,
+    progress: bool | AbstractProgress = False,
     format: str | None = None,
     chunk_rows: int = 200_000,
     region: tuple[Any, Any] | None = None,
@@ -656,7 +654,8 @@ def read_field_arrays(
       overlapping it are located and sampled; Fluent: only the points inside it, plus a
       10 % margin, are triangulated; gridded files are cropped to it plus one node).
     - `time`: OpenFOAM time (number or directory name); default the latest holding `U`.
-    - `progress`: progress bar while reading a Fluent export (tqdm, if installed).
+    - `progress`: progress bar while reading a Fluent export (``True``: tqdm, if installed;
+      or a `lidarjax.progress` meter).
     - `chunk_rows`: rows per parsing chunk for Fluent exports.
     - `max_edge_factor`: Fluent exports: Delaunay simplices longer than this many local
       node spacings are taken as bridging a solid and masked (see `resample_to_grid`).
@@ -719,7 +718,7 @@ def load_field(
     shape: Sequence[int] | None = None,
     time: Any = None,
     max_edge_factor: float = DEFAULT_MAX_EDGE_FACTOR,
-    progress: bool = False,
+    progress: bool | AbstractProgress = False,
     format: str | None = None,
     dtype: Any = None,
     return_report: bool = False,

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -38,7 +39,9 @@ from jaxtyping import Bool, Float, Int, Shaped
 
 from .._util import PathLike, file_error, freeze, import_optional, normalise_key
 from ..flags import MIN_AVAILABILITY, RecordFlag
+from ..progress import AbstractProgress
 from ._windcube import header_facts, read_windcube, report, scalar_arrays, to_utc
+from .record_set import RecordSet, reader_flags
 
 __all__ = ["BEAM_AZIMUTHS", "InstrumentReconstruction", "RtdBeams", "RtdRecord", "group_rtd",
            "instrument_reconstruction", "read_rtd"]
@@ -139,6 +142,16 @@ class RtdRecord:
         """Per-interval mean line-of-sight speed per beam; see `group_rtd` (same keywords)."""
         return group_rtd(self, period=period, min_cnr=min_cnr, **kwargs)
 
+    def to_record_set(
+        self, period: str | np.timedelta64 = "10min", *,
+        cnr_threshold: float | str | None = "header", min_availability: float = MIN_AVAILABILITY,
+    ) -> RecordSet:
+        """Per-interval beam means as a `lidarjax.io.RecordSet`:
+        ``group_rtd(self, period, cnr_threshold=..., min_availability=...).to_record_set()``
+        (`RtdBeams.to_record_set`)."""
+        return group_rtd(self, period, cnr_threshold=cnr_threshold,
+                         min_availability=min_availability).to_record_set()
+
     def to_pandas(self) -> Any:
         """A **long** `pandas.DataFrame`: one row per (line of sight, altitude).
 
@@ -165,7 +178,7 @@ def _position_column(scalars: dict[str, list[str]]) -> str | None:
 
 
 def read_rtd(
-    path: PathLike, *, progress: Callable[[int, int], None] | None = None
+    path: PathLike, *, progress: bool | AbstractProgress | Callable[[int, int], None] | None = None
 ) -> RtdRecord:
     """Read a Windcube `.rtd` / `.stdrtd` real-time line-of-sight file (V1, V2, V2.1).
 
@@ -174,6 +187,9 @@ def read_rtd(
 
     **Returns:** an `RtdRecord` with `los = -rws` (lidarjax: positive away from the lidar;
     Windcube files: positive towards it) and times in UTC.
+
+    `progress`: rows parsed so far: ``True`` draws a line on stderr (`lidarjax.TextProgress`),
+    or give a meter or a `progress(rows_done, rows_total)` callback; ``False``/``None``: silent.
 
     A corrupt row (cut short, unreadable time stamp, non-numeric cell, a position that is
     neither a number nor `V`) is left out with one `UserWarning` naming the file and lines
@@ -279,6 +295,8 @@ class RtdBeams:
     - `partial`: `(r,)` True for a first/last interval the file covers only in part.
     - `cnr_threshold`: the threshold applied, dB (NaN: none); `min_availability`: percent.
     - `cycle`: the scan's cycle time (median spacing of one beam's samples).
+    - `path`, `instrument`, `scan_angle`, `direction_offset`, `pitch`, `roll`, `warnings`:
+      those of the `RtdRecord` grouped (header facts, degrees; NaN when absent).
     """
 
     time: Shaped[np.ndarray, " r"]
@@ -295,11 +313,49 @@ class RtdBeams:
     cnr_threshold: float = float("nan")
     min_availability: float = MIN_AVAILABILITY
     cycle: Any = None
+    path: str = ""
+    instrument: str = ""
+    scan_angle: float = float("nan")
+    direction_offset: float = float("nan")
+    pitch: float = float("nan")
+    roll: float = float("nan")
+    warnings: tuple[str, ...] = ()
 
     @property
     def usable(self) -> Bool[np.ndarray, "r k b"]:
         """`(r, k, b)` True where `los` is finite (no blocking flag)."""
         return np.isfinite(self.los)
+
+    def to_record_set(self) -> RecordSet:
+        """These beam means as a `lidarjax.io.RecordSet` (kind ``"rtd"``), for correction.
+
+        `los` ``(r, k, 5)`` as averaged; `flags` the bits of every beam OR-ed per record and
+        height (with PARTIAL_INTERVAL for a `partial` interval); `availability` the worst
+        tilted beam's; `cnr_threshold` the threshold applied; `period_s` the interval; the
+        header facts and warnings of the record grouped.
+        """
+        los = np.array(self.los, np.float64)
+        shape = los.shape[:2]
+        flags = np.zeros(shape, np.int64)
+        if self.flags is not None:
+            flags = reader_flags(np.bitwise_or.reduce(np.asarray(self.flags, np.int64),
+                                                      axis=-1), shape)
+        if self.partial is not None:
+            flags[np.asarray(self.partial, bool)] |= int(RecordFlag.PARTIAL_INTERVAL)
+        availability = None
+        if self.availability is not None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # a beam-less height: NaN
+                availability = np.nanmin(np.asarray(self.availability, np.float64)[..., :4],
+                                         axis=-1)
+        return RecordSet(
+            kind="rtd", path=self.path, instrument=self.instrument,
+            time=np.asarray(self.time, "datetime64[s]"), heights=np.asarray(self.heights, float),
+            flags=flags, los=los, availability=availability,
+            scan_angle=float(self.scan_angle), direction_offset=float(self.direction_offset),
+            pitch=float(self.pitch), roll=float(self.roll),
+            cnr_threshold=float(self.cnr_threshold),
+            period_s=float(self.period / np.timedelta64(1, "s")), warnings=tuple(self.warnings))
 
 
 _PERIOD = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|sec|min|m|h|hour)s?\s*$", re.IGNORECASE)
@@ -485,6 +541,13 @@ def group_rtd(
         cnr_threshold=threshold,
         min_availability=float(min_availability),
         cycle=np.timedelta64(cycle, "ms"),
+        path=record.path,
+        instrument=record.instrument,
+        scan_angle=float(record.scan_angle),
+        direction_offset=float(record.direction_offset),
+        pitch=float(record.pitch),
+        roll=float(record.roll),
+        warnings=tuple(record.warnings),
     )
 
 

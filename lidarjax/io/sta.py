@@ -30,6 +30,7 @@ from jaxtyping import Bool, Float, Shaped
 
 from .._util import PathLike, atomic_path, file_error, freeze, import_optional, normalise_key
 from ..flags import BLOCKING_FLAGS, MIN_AVAILABILITY, RecordFlag
+from ..progress import AbstractProgress
 from ..scan import Scan
 from ..series import SeriesStatistics
 from ._windcube import (
@@ -41,6 +42,7 @@ from ._windcube import (
     scalar_arrays,
     to_utc,
 )
+from .record_set import DIRECTION_STD_KEYS, RecordSet, extra_column
 
 __all__ = ["STA_FIELDS", "STA_GATE_QUANTITIES", "STA_QUANTITIES", "StaRecord", "read_sta",
            "write_sta", "write_series_sta"]
@@ -243,12 +245,29 @@ class StaRecord:
         """Unit of each per-altitude field."""
         return dict(_UNITS)
 
+    def to_record_set(self) -> RecordSet:
+        """This record as a `lidarjax.io.RecordSet` (kind ``"sta"``), for correction.
+
+        Speed, direction, dispersion and availability as read (the availability minimum was
+        applied by `read_sta`), the direction dispersion from `extra` when the file has one,
+        the header's angles and CNR threshold, `period` and `warnings`.
+        """
+        return RecordSet.reported(
+            "sta", self.path, self.instrument, self.time, self.heights, self.speed,
+            self.direction, self.flags, period=self.period,
+            speed_std=np.array(self.speed_std, np.float64),
+            direction_std=extra_column(self.extra, *DIRECTION_STD_KEYS),
+            availability=np.array(self.availability, np.float64),
+            scan_angle=float(self.scan_angle), direction_offset=float(self.direction_offset),
+            pitch=float(self.pitch), roll=float(self.roll),
+            cnr_threshold=float(self.cnr_threshold), warnings=tuple(self.warnings))
+
 
 def read_sta(
     path: PathLike,
     *,
     min_availability: float = MIN_AVAILABILITY,
-    progress: Callable[[int, int], None] | None = None,
+    progress: bool | AbstractProgress | Callable[[int, int], None] | None = None,
 ) -> StaRecord:
     """Read a Windcube `.sta` / `.stdsta` statistics file: V1 (gate-numbered), V2, V2.1,
     10-minute or 1-minute.
@@ -262,7 +281,9 @@ def read_sta(
     - `min_availability`: percent; records whose `Data Availability` is below it are
       flagged `RecordFlag.LOW_AVAILABILITY` and their wind fields set NaN (default
       `MIN_AVAILABILITY` = 80). Use 0 to keep every record.
-    - `progress`: optional `progress(rows_done, rows_total)` callback.
+    - `progress`: rows parsed so far: ``True`` draws a line on stderr (`lidarjax.TextProgress`),
+      or give a meter (`lidarjax.TqdmProgress()` ...) or a `progress(rows_done, rows_total)`
+      callback; ``False``/``None``: silent.
 
     **Returns:** a `StaRecord`; times in UTC, end of interval.
 

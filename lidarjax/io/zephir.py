@@ -43,9 +43,10 @@ import numpy as np
 from jaxtyping import Float, Shaped
 
 from .._util import PathLike, file_error, freeze, import_optional, normalise_key, require_file, summarise_lines
-from ..flags import BLOCKING_FLAGS, RecordFlag
+from ..flags import BLOCKING_FLAGS, MIN_AVAILABILITY, RecordFlag
 from ._common import offset_timedelta, parse_times, parse_utc_offset, read_text
 from ._windcube import infer_bad_times, regular_step
+from .record_set import DIRECTION_STD_KEYS, RecordSet, extra_column, reader_flags
 
 __all__ = ["ZEPHIR_MISSING", "ZephirRecord", "read_zephir_csv"]
 
@@ -157,6 +158,34 @@ class ZephirRecord:
         for name in ZEPHIR_FIELDS:
             data[name] = getattr(self, name).reshape(-1)
         return pd.DataFrame(data)
+
+    def to_record_set(self, *, min_availability: float = MIN_AVAILABILITY) -> RecordSet:
+        """This record as a `lidarjax.io.RecordSet` (kind ``"zephir"``), for correction.
+
+        From the exported per-height columns (`extra`), when present: `speed_std` from a
+        speed standard deviation, else ``TI * speed`` (TI as a fraction, or in percent when
+        above 1); `direction_std` from a direction dispersion; `n_samples` from ``Packets in
+        Average``; `availability` (percent) from a data availability column, records below
+        `min_availability` percent flagged LOW_AVAILABILITY (and NaN).
+        """
+        speed_std = extra_column(self.extra, "horizontalwindspeedstd", "windspeedstd",
+                                 "horizontalwindspeedsd")
+        ti = extra_column(self.extra, "ti", "turbulenceintensity", "horizontalti")
+        if speed_std is None and ti is not None:
+            frac = ti if np.nanmax(np.abs(ti), initial=0.0) <= 1.0 else ti / 100.0
+            speed_std = frac * np.asarray(self.speed, np.float64)
+        availability = extra_column(self.extra, "dataavailability", "availability")
+        flags = reader_flags(self.flags, np.shape(self.speed))
+        if availability is not None:
+            flags |= np.where(availability < min_availability,
+                              int(RecordFlag.LOW_AVAILABILITY), 0)
+        return RecordSet.reported(
+            "zephir", self.path, self.instrument, self.time, self.heights, self.speed,
+            self.direction, flags, period=self.period, speed_std=speed_std,
+            direction_std=extra_column(self.extra, *DIRECTION_STD_KEYS),
+            availability=availability,
+            n_samples=extra_column(self.extra, "packetsinaverage", "packets", "validpackets"),
+            warnings=tuple(self.warnings))
 
 
 def _plain(name: str) -> str:

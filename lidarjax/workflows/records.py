@@ -12,7 +12,7 @@ Two bit masks per record and height. `CorrectedRecords.flags` holds the
 `lidarjax.InverseFlag` bits of the inversion; `CorrectedRecords.record_flags` the
 `RecordFlag` bits the reader found in the file (corrupt row, low availability, impossible
 value, below the CNR threshold, partial interval, duplicate time, high CNR; see
-`lidarjax.io._common.RecordFlag`). A record the file could not give is NaN with its reason,
+`lidarjax.RecordFlag`). A record the file could not give is NaN with its reason,
 never dropped and never reinterpreted (a negative reported speed is not turned into a
 positive one from the opposite direction).
 
@@ -49,18 +49,18 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import sys
 import warnings
 from pathlib import Path
 
 import numpy as np
 from scipy.io import netcdf_file
 
-from .._util import atomic_path, normalise_key
+from .._util import atomic_path
 from ..angles import horizontal_speed, wind_direction
-from ..flags import BLOCKING_FLAGS, MIN_AVAILABILITY, InverseFlag, RecordFlag
+from ..flags import MIN_AVAILABILITY, InverseFlag, RecordFlag
 from ..inverse import invert, invert_reconstructed
-from ..io import group_rtd, read_rtd, read_sta, read_zephir_csv
+from ..io import RecordSet, read_rtd, read_sta, read_zephir_csv
+from ..progress import AbstractProgress, TextProgress, progress_meter
 from ..response import ResponseTable
 
 __all__ = ["RecordSet", "CorrectedRecords", "load_records", "check_instrument",
@@ -88,123 +88,19 @@ HEIGHT_TOLERANCE_M = 0.5
 # reading
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class RecordSet:
-    """A record file, normalised for correction. Arrays ``(r, k)`` unless noted.
-
-    - `kind`: 'sta', 'rtd' or 'zephir'; `path`; `instrument`: 'windcube_v1',
-      'windcube_v2', 'zephir' or '' when the file does not say.
-    - `time`: ``(r,)`` datetime64[s], end of interval (UTC when the reader knows the zone).
-    - `heights`: ``(k,)`` m above the instrument.
-    - reported records: `speed` (m/s), `direction` (meteorological degrees), `speed_std`
-      (m/s), `direction_std` (deg), `availability` (percent), `n_samples` (ZephIR packets);
-    - raw records: `los` ``(r, k, b)`` m/s positive away from the lidar, beams
-      [0, 90, 180, 270, V]; `availability` (percent, the worst beam's);
-    - `flags`: ``(r, k)`` `RecordFlag` bits; `warnings`: lines about skipped rows;
-    - `scan_angle`, `direction_offset`, `pitch`, `roll`, `cnr_threshold`: header facts in
-      degrees / dB, NaN when the file does not say; `period_s`: interval in seconds.
-    """
-
-    kind: str
-    path: str
-    instrument: str
-    time: np.ndarray
-    heights: np.ndarray
-    flags: np.ndarray
-    speed: np.ndarray | None = None
-    direction: np.ndarray | None = None
-    speed_std: np.ndarray | None = None
-    direction_std: np.ndarray | None = None
-    availability: np.ndarray | None = None
-    n_samples: np.ndarray | None = None
-    los: np.ndarray | None = None
-    scan_angle: float = math.nan
-    direction_offset: float = math.nan
-    pitch: float = math.nan
-    roll: float = math.nan
-    cnr_threshold: float = math.nan
-    period_s: float = 600.0
-    warnings: tuple[str, ...] = ()
-
-
-def _attr(rec, *names, default=math.nan):
-    for n in names:
-        v = getattr(rec, n, None)
-        if v is not None:
-            return v
-    return default
-
-
-def _float_attr(rec, *names, header=()) -> float:
-    """A numeric record attribute, else the first of the `header` keys (normalised match),
-    else NaN."""
-    v = _attr(rec, *names)
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        v = math.nan
-    if math.isnan(v) and header and isinstance(getattr(rec, "header", None), dict):
-        wanted = {normalise_key(k) for k in header}
-        for key, text in rec.header.items():
-            if normalise_key(key) in wanted:
-                try:
-                    return float(str(text).strip())
-                except ValueError:
-                    return math.nan
-    return v
-
-
-def _reader_flags(rec, shape) -> np.ndarray:
-    """The reader's `RecordFlag` bits as ``(r, k)`` (a ``.rtd``'s per-beam bits OR-ed)."""
-    flags = getattr(rec, "flags", None)
-    if flags is None:
-        out = np.zeros(shape, np.int64)
-    else:
-        f = np.asarray(flags).astype(np.int64)
-        if f.ndim == 3:
-            f = np.bitwise_or.reduce(f, axis=-1)
-        out = np.broadcast_to(f.reshape(f.shape + (1,) * (len(shape) - f.ndim)), shape).copy()
-    partial = getattr(rec, "partial", None)
-    if partial is not None:
-        pr = np.asarray(partial, bool).reshape(-1, *([1] * (len(shape) - 1)))
-        out |= np.where(pr, int(RecordFlag.PARTIAL_INTERVAL), 0)
-    return out
-
-
-def _extra(rec, *keys):
-    extra = getattr(rec, "extra", None) or {}
-    for k in keys:
-        if k in extra:
-            return np.asarray(extra[k], np.float64)
-    return None
-
-
-def _instrument_of(rec, kind: str) -> str:
-    text = str(getattr(rec, "instrument", "") or "").lower().replace(" ", "_").replace("-", "_")
-    for key in ("windcube_v1", "windcube_v2", "zephir"):
-        if key in text:
-            return key
-    if "zephir" in text or "zx" in text or kind == "zephir":
-        return "zephir"
-    version = str(getattr(rec, "version", "") or "").upper()
-    if version == "V1":
-        return "windcube_v1"
-    if version.startswith("V2"):
-        return "windcube_v2"
-    return ""
-
-
 def load_records(path, *, cnr_threshold: float | None = None, period: str = "10min",
                  min_availability: float = DEFAULT_MIN_AVAILABILITY,
-                 progress: bool = False) -> RecordSet:
+                 progress: bool | AbstractProgress = False) -> RecordSet:
     """Read a record file (by suffix: ``.sta``/``.stdsta``, ``.rtd``/``.stdrtd``, ``.csv``).
 
-    `cnr_threshold` (dB) overrides the ``.rtd`` header's `CNRThreshold`; `period` is the
-    averaging interval of raw records; records below `min_availability` percent are flagged
-    LOW_AVAILABILITY and not used. The reader's warnings (corrupt rows, by file and line)
-    are collected in `RecordSet.warnings` instead of being printed. Values under a blocking
-    flag are NaN. Raises `ValueError` naming the file for an unknown format or a file that
-    cannot be read at all.
+    The reader's result converts itself (``to_record_set()``: `lidarjax.io.StaRecord`,
+    `lidarjax.io.RtdRecord`, `lidarjax.io.ZephirRecord`). `cnr_threshold` (dB) overrides the
+    ``.rtd`` header's `CNRThreshold`; `period` is the averaging interval of raw records;
+    records below `min_availability` percent are flagged LOW_AVAILABILITY and not used. The
+    reader's warnings (corrupt rows, by file and line) are collected in `RecordSet.warnings`
+    instead of being printed. Values under a blocking flag are NaN. `progress`: a line on
+    stderr while reading a Windcube file (True), or a `lidarjax.progress` meter. Raises
+    `ValueError` naming the file for an unknown format or a file that cannot be read at all.
     """
 
     p = Path(path)
@@ -212,101 +108,20 @@ def load_records(path, *, cnr_threshold: float | None = None, period: str = "10m
     if suffix not in (".sta", ".stdsta", ".csv", ".rtd", ".stdrtd"):
         raise ValueError(f"{p}: unknown record format {suffix!r}; expected .sta, .stdsta, .rtd "
                          "or a ZephIR .csv")
-    show = _progress(f"reading {p.name}", progress)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        if suffix == ".rtd" or suffix == ".stdrtd":
-            raw = read_rtd(p, progress=show if progress else None)
-            beams = group_rtd(raw, period, cnr_threshold=("header" if cnr_threshold is None
-                                                          else float(cnr_threshold)),
-                              min_availability=min_availability)
-            rec = None
+        if suffix in (".rtd", ".stdrtd"):
+            records = read_rtd(p, progress=progress).to_record_set(
+                period, cnr_threshold="header" if cnr_threshold is None else float(cnr_threshold),
+                min_availability=min_availability)
         elif suffix == ".csv":
-            rec = read_zephir_csv(p)
+            records = read_zephir_csv(p).to_record_set(min_availability=min_availability)
         else:
-            rec = read_sta(p, min_availability=min_availability,
-                           progress=show if progress else None)
+            records = read_sta(p, min_availability=min_availability,
+                               progress=progress).to_record_set()
     notes = [str(w.message) for w in caught]
-    source = rec if rec is not None else raw
-    notes += [w for w in (getattr(source, "warnings", ()) or ()) if w not in notes]
-    facts = dict(
-        scan_angle=_float_attr(source, "scan_angle", header=("ScanAngle",)),
-        direction_offset=_float_attr(source, "direction_offset", header=("DirectionOffset",)),
-        pitch=_float_attr(source, "pitch", "pitch_angle", header=("PitchAngle",)),
-        roll=_float_attr(source, "roll", "roll_angle", header=("RollAngle",)),
-        warnings=tuple(notes),
-    )
-    if rec is None:  # raw line-of-sight records, averaged per interval and beam
-        los = np.array(beams.los, np.float64)
-        shape = los.shape[:2]
-        flags = _reader_flags(beams, shape)
-        avail = getattr(beams, "availability", None)
-        a = None
-        if avail is not None:
-            a = np.asarray(avail, np.float64)
-            if a.ndim == 3:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                    a = np.nanmin(a[..., :4], axis=-1)  # the worst tilted beam
-        return RecordSet(
-            kind="rtd", path=str(p), instrument=_instrument_of(raw, "rtd"),
-            time=np.asarray(beams.time, "datetime64[s]"), heights=np.asarray(beams.heights, float),
-            flags=flags, los=los, availability=a,
-            cnr_threshold=float(getattr(beams, "cnr_threshold", math.nan)),
-            period_s=float(beams.period / np.timedelta64(1, "s")), **facts)
-    kind = "zephir" if suffix == ".csv" else "sta"
-    speed = np.array(rec.speed, np.float64)
-    direction = np.array(rec.direction, np.float64)
-    shape = speed.shape
-    flags = _reader_flags(rec, shape)
-    speed_std = getattr(rec, "speed_std", None)
-    speed_std = None if speed_std is None else np.array(speed_std, np.float64)
-    availability = getattr(rec, "availability", None)
-    availability = None if availability is None else np.array(availability, np.float64)
-    n_samples = None
-    direction_std = _extra(rec, "winddirectiondispersion", "winddirectionstd",
-                           "directiondispersion", "directionstd")
-    if kind == "zephir":
-        ti = _extra(rec, "ti", "turbulenceintensity", "horizontalti")
-        std = _extra(rec, "horizontalwindspeedstd", "windspeedstd", "horizontalwindspeedsd")
-        if std is not None:
-            speed_std = std
-        elif ti is not None:  # TI as a fraction or in percent
-            frac = ti if np.nanmax(np.abs(ti), initial=0.0) <= 1.0 else ti / 100.0
-            speed_std = frac * speed
-        n_samples = _extra(rec, "packetsinaverage", "packets", "validpackets")
-        if availability is None:
-            availability = _extra(rec, "dataavailability", "availability")
-        if availability is not None:
-            flags |= np.where(availability < min_availability,
-                              int(RecordFlag.LOW_AVAILABILITY), 0)
-    # the readers flag these already; kept as a guard for any record handed in
-    bad = (speed < 0) | (direction < 0) | (direction > 360)
-    flags |= np.where(bad, int(RecordFlag.IMPOSSIBLE_VALUE), 0)
-    unusable = (flags & int(BLOCKING_FLAGS)) != 0
-    speed[unusable] = np.nan
-    direction[unusable] = np.nan
-    time = np.asarray(rec.time, "datetime64[s]")
-    return RecordSet(
-        kind=kind, path=str(p), instrument=_instrument_of(rec, kind), time=time,
-        heights=np.asarray(rec.heights, float), flags=flags, speed=speed, direction=direction,
-        speed_std=speed_std, direction_std=direction_std, availability=availability,
-        n_samples=n_samples, period_s=_period_seconds(rec, time), **facts)
-
-
-def _period_seconds(rec, time) -> float:
-    period = getattr(rec, "period", None)
-    if period is not None:
-        try:
-            return float(np.timedelta64(period) / np.timedelta64(1, "s"))
-        except (TypeError, ValueError):
-            pass
-    if time.size > 1:
-        steps = np.diff(time).astype("timedelta64[s]").astype(np.int64)
-        steps = steps[steps > 0]
-        if steps.size:
-            return float(np.median(steps))
-    return 600.0
+    notes += [w for w in records.warnings if w not in notes]
+    return dataclasses.replace(records, warnings=tuple(notes))
 
 
 # ------------------------------------------------------------------------------------------
@@ -501,21 +316,10 @@ class CorrectedRecords:
     warnings: tuple[str, ...] = ()
 
 
-def _progress(label: str, enabled: bool):
-    """A callback ``(done, total)`` drawing a one-line progress bar on stderr."""
-    if not enabled:
-        return lambda done, total: None
-    state = {"last": -1}
-
-    def show(done, total):
-        pct = 100 if total == 0 else int(100 * done / total)
-        if pct != state["last"]:
-            state["last"] = pct
-            end = "\n" if done >= total else ""
-            print(f"\r{label}: {pct:3d} % ({done}/{total})", end=end, file=sys.stderr,
-                  flush=True)
-
-    return show
+def _progress(label: str, progress):
+    """A ``(done, total)`` callback reporting through the meter `progress` asks for (True: a
+    one-line bar on stderr, `lidarjax.progress.TextProgress`)."""
+    return progress_meter(progress, TextProgress).callback(label)
 
 
 def _homogeneous(los, vectors):
@@ -544,7 +348,7 @@ def correct_records(
     *,
     noise: float | None = None,
     chunk_records: int = 8192,
-    progress: bool = False,
+    progress: bool | AbstractProgress = False,
     records: RecordSet | None = None,
     scan_period_s: float | None = None,
     cnr_threshold: float | None = None,
@@ -742,7 +546,7 @@ def _csv_chunk(columns: list[np.ndarray]) -> bytes:
 
 
 def write_corrected_csv(path, corrected: CorrectedRecords, metadata: dict | None = None, *,
-                        progress: bool = False, chunk_records: int = 8192):
+                        progress: bool | AbstractProgress = False, chunk_records: int = 8192):
     """Write corrected records as a long CSV (one row per record and height), atomically and
     in chunks (bounded memory).
 

@@ -1,13 +1,13 @@
 """The seed UDF's workflow on top of `simulate`: settings.dat in, seed output files out.
 
-`simulate_settings` runs every platform rotation (beta) of a `Settings` in one compiled
-batch when the CFD runs share a grid (one trace, ``jax.vmap`` over the runs), and
+`simulate_settings` runs every platform rotation (beta) of a `Settings` in compiled batches
+when the CFD runs share a grid (one trace, ``jax.vmap`` over the runs and one batched
+`Mount`, from `settings_mount`), and
 `seed_columns` turns a `Simulation` into the seed's 21 output columns.
 """
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable, Sequence
 
@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._backend import default_batch
 from .._util import import_optional
 from ..angles import horizontal_speed, seed_azimuth
 from ..batch import simulate_rotations, stack_fields
@@ -23,6 +24,7 @@ from ..footprint import scan_bounds
 from ..forward import Simulation, simulate
 from ..io.settings import Settings
 from ..mount import Mount
+from ..progress import AbstractProgress, LineProgress, progress_meter
 from ..response import ResponseTable
 
 __all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "SEED_U_REF"]
@@ -56,10 +58,25 @@ def seed_columns(sim: Simulation) -> dict[str, np.ndarray]:
     return {k: np.asarray(v, dtype=np.float64) for k, v in cols.items()}
 
 
+def settings_mount(settings: Settings, betas: Sequence[float], *, pitch: float = 0.0,
+                   roll: float = 0.0) -> Mount:
+    """Every platform rotation of `betas` (degrees) as one batched `Mount` (location
+    ``(s, 3)`` from the settings' row for each beta, angles ``(s,)``): the settings' gamma,
+    psi and epsilon, with the installation's `pitch` and `roll` (degrees). Built in one
+    call, whatever the number of rotations; ``mount[k]`` is the mount of ``betas[k]``."""
+    betas = np.asarray([float(b) for b in betas], np.float64)
+    if betas.size == 0:
+        raise ValueError("settings_mount: `betas` is empty; give at least one platform rotation.")
+    locations = np.stack([np.asarray(settings.location(b), np.float64) for b in betas])
+    return Mount(locations, beta=betas, gamma=settings.gamma, psi=settings.psi,
+                 epsilon=settings.epsilon, pitch=pitch, roll=roll)
+
+
 def settings_mounts(settings: Settings, betas: Sequence[float], *, pitch: float = 0.0,
                     roll: float = 0.0) -> list[Mount]:
-    """The `Mount` of each platform rotation: the settings' location row for that beta and
-    its gamma, psi and epsilon, with the installation's `pitch` and `roll` (degrees)."""
+    """The `Mount` of each platform rotation, as a list: the settings' location row for that
+    beta and its gamma, psi and epsilon, with the installation's `pitch` and `roll`
+    (degrees). `settings_mount` gives the same as one batched `Mount`."""
     return [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
                   epsilon=settings.epsilon, pitch=pitch, roll=roll) for b in betas]
 
@@ -74,6 +91,7 @@ def simulate_settings(
     probe=None,
     pitch: float = 0.0,
     roll: float = 0.0,
+    batch_size: int | None = None,
 ) -> dict[float, Simulation]:
     """Simulate the lidar of `settings` for each platform rotation in `betas`.
 
@@ -87,23 +105,45 @@ def simulate_settings(
     - `u_ref`: free-stream vector in the CFD frame (m/s); default the seed UDF's.
     - `probe`: probe volume (default point).
     - `pitch`, `roll`: the installation's tilt in degrees (`lidarjax.Mount`), default level.
+    - `batch_size`: runs stacked and simulated together (`simulate_rotations` with one
+      batched `Mount`); None (default) chooses per backend and the runs' size
+      (`lidarjax._backend.default_batch`): as many as fit in an eighth of the available
+      memory on a CPU (a quarter of the free device memory on a GPU), all of them for
+      ordinary grids. The last batch is padded with its last run, so every batch shares one
+      compilation.
 
-    **Returns:** ``{beta: Simulation}``. Runs on one grid are simulated in one compiled,
-    vmapped batch; otherwise one call per run (one compilation per distinct grid shape).
+    **Returns:** ``{beta: Simulation}``. Runs on one grid are simulated in compiled,
+    vmapped batches; otherwise one call per run (one compilation per distinct grid shape).
     """
     betas = [float(b) for b in betas]
-    mounts = settings_mounts(settings, betas, pitch=pitch, roll=roll)
+    mount = settings_mount(settings, betas, pitch=pitch, roll=roll)
     heights = jnp.asarray(settings.heights())
     fields = [field_for_beta(b) for b in betas]
-    try:
-        stacked = stack_fields(fields) if len(fields) > 1 else None
-    except ValueError:  # runs on different grids: one call (and compilation) per grid
-        stacked = None
-    if stacked is None:
-        return {b: simulate(f, scan, m, heights, u_ref=u_ref, probe=probe)
-                for b, f, m in zip(betas, fields, mounts, strict=True)}
-    batch = simulate_rotations(stacked, scan, mounts, heights, u_refs=u_ref, probe=probe)
-    return {b: jax.tree_util.tree_map(lambda a, i=i: a[i], batch) for i, b in enumerate(betas)}
+    n = len(betas)
+    if batch_size is None:  # the stacked copy and the vmapped temporaries of one run
+        per_run = 2 * getattr(fields[0], "nbytes", 0) + 1
+        batch_size = default_batch("rotations", per_run, n)
+    elif isinstance(batch_size, bool) or int(batch_size) != batch_size or int(batch_size) < 1:
+        raise ValueError(f"simulate_settings: `batch_size` must be a positive int or None "
+                         f"(chosen per backend), got {batch_size!r}.")
+    size = min(int(batch_size), n)
+    out: dict[float, Simulation] = {}
+    for i in range(0, n, size):  # the last batch padded with its last run: one compilation
+        idx = np.minimum(np.arange(i, i + size), n - 1)
+        try:
+            stacked = stack_fields([fields[k] for k in idx]) if size > 1 else None
+        except ValueError:  # runs on different grids: one call (and compilation) per grid
+            stacked = None
+        if stacked is None:
+            for k in range(i, min(i + size, n)):
+                out[betas[k]] = simulate(fields[k], scan, mount[k], heights, u_ref=u_ref,
+                                         probe=probe)
+            continue
+        batch = simulate_rotations(stacked, scan, mount if size == n else mount[idx], heights,
+                                   u_refs=u_ref, probe=probe)
+        for j, k in enumerate(range(i, min(i + size, n))):
+            out[betas[k]] = jax.tree_util.tree_map(lambda a, j=j: a[j], batch)
+    return out
 
 
 def build_table(
@@ -117,7 +157,7 @@ def build_table(
     pitch: float = 0.0,
     roll: float = 0.0,
     client=None,
-    progress: bool = False,
+    progress: bool | AbstractProgress = False,
 ):
     """A `lidarjax.ResponseTable` from the CFD runs of a seed settings file.
 
@@ -139,12 +179,13 @@ def build_table(
       ``jax_enable_x64`` setting (checked: the command line sets it on them). The table is
       identical to the serial one.
     - `pitch`, `roll`: the installation's tilt in degrees (`lidarjax.Mount`), default level.
-    - `progress`: one line per finished run on stderr (run, beta, grid before and after the
-      crop, seconds).
+    - `progress`: ``True``: one line per finished run on stderr (run, beta, grid before and
+      after the crop, seconds; `lidarjax.progress.LineProgress`), or a `lidarjax.progress`
+      meter.
     """
 
     betas = [float(b) for b in betas]
-    mounts = settings_mounts(settings, betas, pitch=pitch, roll=roll)
+    mounts = list(settings_mount(settings, betas, pitch=pitch, roll=roll))  # one per run
     heights = np.asarray(settings.heights())
     lo, hi = table_region(settings, betas, scan, probe=probe, pitch=pitch, roll=roll)
     u_ref = np.asarray(u_ref, np.float64)
@@ -152,12 +193,14 @@ def build_table(
     run = _TableRun(field_for_beta, scan, heights, u_ref, probe, lo, hi)
     sims: dict[float, Simulation] = {}
 
+    meter = progress_meter(progress, LineProgress)
+    bar = meter.start(len(betas), "table", unit="run")
+
     def report(k, result):
         b, sim, info = result
         sims[b] = sim
-        if progress:
-            print(f"table: run {k}/{len(betas)} beta {b:g}: grid {info['shape']} -> crop "
-                  f"{info['crop']} in {info['seconds']:.1f} s", file=sys.stderr)
+        meter.update(bar, k, f"beta {b:g}: grid {info['shape']} -> crop {info['crop']} in "
+                             f"{info['seconds']:.1f} s")
 
     if client is None:
         for k, task in enumerate(tasks, 1):
@@ -174,6 +217,7 @@ def build_table(
                 f"build_table: the dask workers computed in {', '.join(map(str, got))} but this "
                 f"process uses {want}; set the same jax_enable_x64 on the workers, e.g. "
                 "client.run(jax.config.update, 'jax_enable_x64', True)")
+    meter.close(bar)
     sims = {b: sims[b] for b in betas}
     table = ResponseTable.from_simulations(list(sims.values()), mount=mounts)
     return table, sims
@@ -185,8 +229,8 @@ def table_region(settings: Settings, betas: Sequence[float], scan, *, probe=None
     the installation's `pitch` and `roll`, degrees) samples (`lidarjax.scan_bounds` of all of
     them with the probe and the point reference); the region to load from each CFD run."""
 
-    mounts = settings_mounts(settings, [float(b) for b in betas], pitch=pitch, roll=roll)
-    return scan_bounds(scan, mounts, np.asarray(settings.heights()), probe=probe)
+    mount = settings_mount(settings, [float(b) for b in betas], pitch=pitch, roll=roll)
+    return scan_bounds(scan, mount, np.asarray(settings.heights()), probe=probe)
 
 
 class _TableRun:

@@ -19,7 +19,7 @@ import lidarjax
 from lidarjax._precision import split
 from lidarjax.field import AbstractField
 from lidarjax.io.sta import write_series_sta
-from lidarjax.motion import SampledMotion, SinusoidalMotion
+from lidarjax.motion import SinusoidalMotion
 from lidarjax.series import simulate_series, simulate_statistics, statistics
 from lidarjax.timing import Schedule, schedule_for
 
@@ -65,20 +65,7 @@ MOUNT = lidarjax.Mount([0.0, 0.0, 0.0])
 HEIGHTS = [40.0, 100.0]
 
 
-def test_schedule_defaults_and_validation():
-    v1, v2, zp = (schedule_for(s) for s in (lidarjax.windcube_v1(), lidarjax.windcube_v2(),
-                                            lidarjax.zephir()))
-    np.testing.assert_allclose(v1.beam_times, [0, 1.5, 3.0, 4.5])
-    assert float(v1.period) == 6.0 and v1.update == "each_los" and not v1.heights_sequential
-    np.testing.assert_allclose(v2.beam_times, [0, 1, 2, 3, 4])
-    assert float(v2.period) == 5.0
-    assert zp.heights_sequential and zp.rotations_per_height == 3 and zp.update == "each_visit"
-    np.testing.assert_allclose(float(zp.period), 1.0)
-    assert float(zp.cycle_time(5)) == 15.0
-    with pytest.raises(ValueError, match="period"):
-        Schedule([0, 1, 2], 1.5)
-    with pytest.raises(ValueError, match="update"):
-        Schedule([0, 1, 2], 3.0, update="sometimes")
+def test_series_refuses_a_schedule_that_does_not_fit_the_scan():
     with pytest.raises(ValueError, match="one time per beam"):
         simulate_series(gust(), lidarjax.windcube_v2(), MOUNT, HEIGHTS, (0.0, 60.0),
                         schedule=Schedule([0, 1, 2, 3], 4.0))
@@ -229,24 +216,6 @@ def test_surging_lidar_adds_its_velocity_variance():
     np.testing.assert_allclose(st.speed_std[0], amp * 2 * np.pi / period / np.sqrt(2), rtol=1e-10)
 
 
-def test_sampled_motion_interpolates_a_log():
-    """A logged sinusoid, linearly interpolated, gives the sinusoid's state (to the
-    interpolation error), its velocity by central differences, and NaN outside the log."""
-    amp, period = 2.0, 8.0
-    exact = SinusoidalMotion.of(surge=(amp, period), pitch=(3.0, 5.0))
-    tt = np.arange(0.0, 60.0, 0.02)
-    state = jax.jit(lambda motion, t: motion.state(t))
-    off, vel, att = (np.asarray(a) for a in state(exact, tt))
-    logged = SampledMotion(tt, off, att)
-    t = np.concatenate([np.linspace(1.0, 50.0, 777), [-1.0, 61.0]])
-    got, want = state(logged, t), state(exact, t)
-    for a, b, tol in zip(got, want, (1e-3, 4e-3, 2e-3), strict=True):
-        np.testing.assert_allclose(np.asarray(a)[:-2], np.asarray(b)[:-2], atol=tol)
-        assert np.all(np.isnan(np.asarray(a)[-2:]))
-    with pytest.raises(ValueError, match="increasing"):
-        SampledMotion([0.0, 0.0, 1.0])
-
-
 def test_gradient_of_statistics_matches_finite_difference():
     scan = lidarjax.windcube_v2()
     sched = schedule_for(scan)  # concrete: it sets the number of LOS
@@ -309,31 +278,6 @@ def test_sharded_over_forced_host_devices():
     assert "OK (3, 2)" in out.stdout
 
 
-def test_series_command_writes_sta_and_statistics(tmp_path, capsys):
-    from lidarjax.cli import main
-    from lidarjax.io import Settings, read_table_csv, write_settings
-
-    settings = tmp_path / "settings.dat"
-    write_settings(settings, Settings(zone=2, verbose=1, height=100.0, nh=2, gamma=0.0, beta=0.0,
-                                      psi=0.0, epsilon=0.0, betas=np.array([0.0]),
-                                      locations=np.array([[0.0, 0.0, 0.0]])))
-    out = tmp_path / "out"
-    args = ["series", str(settings), "--field", "uniform", "--speed", "10", "--direction", "270",
-            "--generate-box", "64,16,16", "--box-spacing", "8,8,8", "--hours", "0.34",
-            "--probe", "point", "--no-plots", "--out", str(out)]
-    assert main(args) == 0
-    rec = lidarjax.io.read_sta(out / "series.sta")
-    assert rec.speed.shape == (2, 2)
-    np.testing.assert_allclose(rec.heights, [50.0, 100.0])
-    assert np.all(np.abs(rec.speed - 10.0) < 1.5) and np.all(rec.speed_std > 0)
-    table = read_table_csv(out / "series_statistics.csv")
-    np.testing.assert_allclose(table.columns["cup_ti"], table.columns["cup_std"]
-                               / table.columns["cup_speed"])
-    assert "TI_lidar" in capsys.readouterr().out
-    assert main(args + ["--hours", "0.01"]) == 2
-    assert "no whole 10-minute record" in capsys.readouterr().err
-
-
 def test_float32_year_long_records_keep_their_time_resolution():
     """A record a year in, in float32, matches the float64 simulation of that record (float32
     times of 3e7 s alone would be rounded to 2 s): FrozenTurbulence is advanced per chunk on
@@ -357,27 +301,6 @@ def test_float32_year_long_records_keep_their_time_resolution():
     assert st_far.speed.dtype == np.float32
     np.testing.assert_allclose(st_far.speed_std, st_ref.speed_std, rtol=1e-4)
     np.testing.assert_allclose(st_far.speed, st_ref.speed, rtol=1e-6)
-
-
-def test_read_motion_csv(tmp_path):
-    from lidarjax.io import read_motion_csv
-
-    p = tmp_path / "buoy.csv"
-    p.write_text("# buoy motion\ntime [s],heave [m],roll [deg],surge\n0,0.1,1.0,0.0\n1,0.2,-1.0,0.5\n"
-                 "2,0.0,0.5,0.2\n")
-    m = read_motion_csv(p)
-    np.testing.assert_allclose(m.times, [0, 1, 2])
-    np.testing.assert_allclose(m.offset[:, 2], [0.1, 0.2, 0.0])  # heave -> z
-    np.testing.assert_allclose(m.offset[:, 1], [0.0, 0.5, 0.2])  # surge -> y
-    np.testing.assert_allclose(m.attitude[:, 1], [1.0, -1.0, 0.5])  # roll
-    np.testing.assert_allclose(m.attitude[:, 0], 0.0)
-    bad = tmp_path / "bad.csv"
-    bad.write_text("time,bob\n0,1\n1,2\n")
-    with pytest.raises(ValueError, match="bad.csv, line 1"):
-        read_motion_csv(bad)
-    bad.write_text("time,heave\n0,1\n0,2\n")
-    with pytest.raises(ValueError, match="line 3.*increase"):
-        read_motion_csv(bad)
 
 
 def test_probe_refined_to_the_box_resolution():

@@ -1,4 +1,5 @@
-"""CFD probes: the lidar's points out (OpenFOAM, zCFD, CSV), the CFD code's samples back in,
+"""CFD monitor points (`lidarjax.monitor_points`, `lidarjax.simulate_from_monitor_points`):
+the lidar's points out (OpenFOAM, zCFD, CSV), the CFD code's samples back in,
 and the same `Simulation` as `simulate` on the field itself."""
 
 import re
@@ -8,18 +9,16 @@ import numpy as np
 import pytest
 
 import lidarjax as lj
-from lidarjax.cli import main
 from lidarjax.io import (
-    Settings,
     read_monitor_points_csv,
     read_monitor_values_csv,
     read_openfoam_probes,
     write_monitor_points_csv,
     write_openfoam_probes,
-    write_settings,
     write_zcfd_probes,
 )
 
+from .._foamwrite import write_probes_output
 from ..helpers import DATA
 
 SCENE = lj.scenes.hemisphere(radius=20.0, speed=10.0, direction=250.0)
@@ -30,25 +29,6 @@ MOUNTS = [lj.Mount([4.0, 3.0, 20.1], beta=0.0, gamma=5.0, psi=180.0, epsilon=21.
 U_REF = 10.0 * np.asarray(lj.heading(250.0))
 OUTPUTS = ("los", "lidar_velocity", "point_velocity", "free_velocity", "cff_u", "cff_v", "cff_w",
            "cff_U", "cff_th", "cfp_u", "cfp_v", "cfp_w", "cfp_U", "cfp_th", "flags")
-
-
-def write_foam_output(path, locations, times_values, unset=()):
-    """OpenFOAM v1912 probes output, as `postProcess -func <name>` writes it (full
-    precision here so the round trip can be checked to rounding)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    lines = []
-    for i, p in enumerate(locations.points):
-        tail = "  # Not Found" if i in unset else ""
-        lines.append(f"# Probe {i} ({p[0]:.17g} {p[1]:.17g} {p[2]:.17g}){tail}")
-    lines.append("#       Probe" + "".join(f"{i:>14d}" for i in range(len(locations))))
-    lines.append("#        Time")
-    for t, vals in times_values:
-        cells = []
-        for i, v in enumerate(vals):
-            v = (-1e300,) * 3 if i in unset else v
-            cells.append("(" + " ".join(f"{x:.17g}" for x in v) + ")")
-        lines.append(f"{t:>13g}             " + "             ".join(cells))
-    path.write_text("\n".join(lines) + "\n")
 
 
 @pytest.fixture(scope="module")
@@ -97,8 +77,8 @@ def test_openfoam_round_trip_with_restart_equals_simulate(case, tmp_path):
     root = tmp_path / "postProcessing" / "lidarProbes"
     stale = values + 1.0
     # a run written at 0..200, restarted from 100 (the later folder wins at 100 and 200)
-    write_foam_output(root / "0" / "U", locs, [(0, stale * 0), (100, stale), (200, stale)])
-    write_foam_output(root / "100" / "U", locs, [(100, stale), (200, values)])
+    write_probes_output(root / "0" / "U", locs, [(0, stale * 0), (100, stale), (200, stale)])
+    write_probes_output(root / "100" / "U", locs, [(100, stale), (200, values)])
     samples = read_openfoam_probes(root)
     assert samples.start_times == ("0", "100") and samples.times.tolist() == [0, 100, 200]
     sims = lj.simulate_from_monitor_points(locs, samples.values_for(locs), SCAN, MOUNTS, HEIGHTS,
@@ -130,7 +110,7 @@ def test_probes_outside_the_mesh_are_flagged_not_bridged(case, tmp_path):
     probe, locs, values, refs = case
     lost = int(np.flatnonzero((np.asarray(locs.mount) == "b30") & (locs.height == 40.0)
                               & (locs.beam == 2))[0])
-    write_foam_output(tmp_path / "U", locs, [(1, values)], unset={lost})
+    write_probes_output(tmp_path / "U", locs, [(1, values)], unset={lost})
     samples = read_openfoam_probes(tmp_path / "U")
     assert not samples.found[lost] and np.isnan(samples.values[0, lost]).all()
     sims = lj.simulate_from_monitor_points(locs, samples.values_for(locs), SCAN, MOUNTS, HEIGHTS,
@@ -190,53 +170,9 @@ def test_mismatched_configuration_is_refused(case, tmp_path):
     with pytest.raises(ValueError, match="was written at"):
         lj.simulate_from_monitor_points(locs, values, SCAN, moved, HEIGHTS, probe=probe)
     other = lj.monitor_points(SCAN, MOUNTS, HEIGHTS * 1.5, probe)
-    write_foam_output(tmp_path / "U", other, [(1, np.zeros((len(other), 3)))])
+    write_probes_output(tmp_path / "U", other, [(1, np.zeros((len(other), 3)))])
     with pytest.raises(ValueError, match="other probes"):
         read_openfoam_probes(tmp_path / "U").values_for(locs)
-
-
-def test_cli_writes_then_reads_back(tmp_path, capsys):
-    locs_xyz = np.array([[4.0, 3.0, 20.1], [-3.0, 6.0, 20.1]])
-    write_settings(tmp_path / "settings.dat", Settings(
-        zone=2, verbose=1, height=80.0, nh=2, gamma=5.0, beta=0.0, psi=180.0, epsilon=21.0,
-        betas=np.array([0.0, 30.0]), locations=locs_xyz))
-    base = ["monitor-points", str(tmp_path / "settings.dat"), "--all", "--scan", "windcube_v2"]
-    assert main(base + ["--heights", "10,40,80", "--out", str(tmp_path / "p")]) == 0
-    locs = read_monitor_points_csv(tmp_path / "p" / "lidarProbes.csv")
-    assert (tmp_path / "p" / "lidarProbes").is_file() and (tmp_path / "p" / "lidarProbes_zcfd.py").is_file()
-    values = np.asarray(SCENE.sample(locs.points))
-    write_foam_output(tmp_path / "pp" / "lidarProbes" / "500" / "U", locs, [(500, values)])
-    argv = base + ["--heights", "10,40,80", "--sampled", str(tmp_path / "pp" / "lidarProbes"),
-                   "--u-ref", ",".join(map(str, U_REF)), "--out", str(tmp_path / "r")]
-    assert main(argv) == 0
-    from lidarjax.io import read_table_csv
-
-    cols = read_table_csv(tmp_path / "r" / "simulation_30.csv").columns
-    assert (tmp_path / "r" / "windcube simulation 30 degrees.dat").is_file()
-    mount = lj.Mount(locs_xyz[1], beta=30.0, gamma=5.0, psi=180.0, epsilon=21.0)
-    ref = lj.simulate(SCENE, SCAN, mount, [10.0, 40.0, 80.0], u_ref=U_REF)  # the point probe
-    np.testing.assert_allclose(cols["U_mag_lidar"], np.asarray(ref.lidar_speed), atol=1e-12)
-    np.testing.assert_allclose(cols["cff_U"], np.asarray(ref.cff_U), atol=1e-12)
-    np.testing.assert_allclose(cols["cfp_th"], np.asarray(ref.cfp_th), atol=1e-10)
-    # heights other than those written: one clear line, exit 2
-    capsys.readouterr()
-    bad = [a if a != "10,40,80" else "10,50" for a in argv]
-    assert main(bad) == 2
-    assert "lidarjax monitor-points: error:" in capsys.readouterr().err
-
-
-def test_cli_old_name_probes_still_works_with_one_deprecation_line(tmp_path, capsys):
-    write_settings(tmp_path / "settings.dat", Settings(
-        zone=2, verbose=1, height=80.0, nh=2, gamma=5.0, beta=0.0, psi=180.0, epsilon=21.0,
-        betas=np.array([0.0]), locations=np.array([[4.0, 3.0, 20.1]])))
-    argv = [str(tmp_path / "settings.dat"), "--scan", "windcube_v2", "--heights", "10,40"]
-    assert main(["probes", *argv, "--out", str(tmp_path / "old")]) == 0
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["lidarjax probes: deprecated name; use 'lidarjax monitor-points' (same options)"]
-    assert main(["monitor-points", *argv, "--out", str(tmp_path / "new")]) == 0
-    assert capsys.readouterr().err == ""
-    old = (tmp_path / "old" / "lidarProbes.csv").read_text()
-    assert old == (tmp_path / "new" / "lidarProbes.csv").read_text()
 
 
 REAL = DATA / "openfoam_probes" / "turbineSiting"
