@@ -7,6 +7,9 @@ CSV ``name,u,v,w``) through the forward model, written as `lidarjax simulate` wr
 
 The command was called ``probes`` before 0.2; that name still works, with a one-line
 deprecation note on stderr.
+
+The points are `lidarjax.monitor_points`, the simulation `lidarjax.simulate_from_monitor_points`
+and the result files `lidarjax.write_seed_results`; this module parses and prints.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from ..io.monitor_points import (
     write_zcfd_probes,
 )
 from ..workflows.monitor_points import monitor_points, simulate_from_monitor_points
+from ..workflows.seed_results import write_seed_results
 from ..workflows.seed_tables import settings_mounts
 from ._common import (
     add_probe_arguments,
@@ -37,7 +41,6 @@ from ._common import (
     selected_betas,
     vector,
 )
-from .simulate import write_results
 
 SCAN_CHOICES = ("windcube_v1", "windcube_v2", "zephir")
 
@@ -144,6 +147,7 @@ def _read(args) -> int:
         values = read_openfoam_probes(src, field="U").values_for(locs, time=args.time)
     sims = simulate_from_monitor_points(locs, values, scan, mounts, heights, probe=probe,
                                 u_ref=args.u_ref)
-    write_results(args, settings, dict(zip(betas, sims, strict=True)),
-                  {b: str(src) for b in betas})
+    write_seed_results(args.out, settings, dict(zip(betas, sims, strict=True)),
+                       scan=args.scan, u_ref=args.u_ref, sources=str(src),
+                       settings_file=args.settings, log=print)
     return 0

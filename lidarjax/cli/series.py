@@ -1,24 +1,27 @@
 """`lidarjax series`: a lidar's simulated 10-minute statistics in frozen turbulence over a
-mean flow -> a simulated ``.sta``, the statistics as CSV and lidar against point TI."""
+mean flow -> a simulated ``.sta``, the statistics as CSV and lidar against point TI.
+
+The field is `lidarjax.series_field` (`lidarjax.workflows.series_run`), the statistics
+`lidarjax.simulate_statistics` and the files `lidarjax.write_series_report`; this module
+parses, checks the options and prints.
+"""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-import jax.numpy as jnp
 import numpy as np
 
 from .. import scan as scans
-from ..angles import horizontal_speed, wind_direction
-from ..io import read_hawc2_box, read_motion_csv, read_settings, read_turbsim
+from ..io import read_motion_csv, read_settings
 from ..io.fields import load_field
 from ..mount import Mount
-from ..scenes import FrozenTurbulence, uniform
+from ..scenes import uniform
 from ..series import RECORD_LENGTH, probe_for_field, simulate_statistics
 from ..timing import schedule_for
-from ..turbulence import TurbulenceBox, fft_mann_box, mann_box
 from ..workflows.series_report import write_series_report
+from ..workflows.series_run import mean_wind_above, series_field
 from ._common import (
     SCAN_CHOICES,
     add_probe_arguments,
@@ -165,7 +168,8 @@ def run(args) -> int:
 
 
 def build_field(args, settings, beta, location, heights):
-    """The frozen-turbulence field of the arguments and a one-line description."""
+    """The frozen-turbulence field of the arguments and a one-line description
+    (`lidarjax.series_field`, with the options checked and named here)."""
 
     if args.field == "uniform":
         if args.speed is None or args.direction is None:
@@ -173,42 +177,29 @@ def build_field(args, settings, beta, location, heights):
         mean = uniform(args.speed, args.direction)
     else:
         mean = load_field(args.field)
-    origin = np.asarray(mean.origin, np.float64) + np.asarray(mean.origin_lo, np.float64)
-    anchor = np.asarray(location, np.float64) - origin
-    if args.speed is None or args.direction is None:
-        top = np.asarray(location, np.float64) + np.array([0.0, 0.0, float(heights[-1])])
-        v = mean.sample(top[None, :])[0]
-        if not bool(jnp.all(jnp.isfinite(v))):
+    speed, direction = args.speed, args.direction
+    if speed is None or direction is None:
+        s, d = mean_wind_above(mean, location, float(heights[-1]))
+        if not np.isfinite(s):
+            top = np.asarray(location, np.float64) + np.array([0.0, 0.0, float(heights[-1])])
             raise ValueError(f"the mean flow is undefined above the lidar at {top.tolist()}; "
                              "give --speed and --direction")
-    speed = float(horizontal_speed(v)) if args.speed is None else float(args.speed)
-    direction = float(wind_direction(v)) if args.direction is None else float(args.direction)
+        speed = s if speed is None else float(speed)
+        direction = d if direction is None else float(direction)
     if not speed > 0:
         raise ValueError(f"the advection speed must be positive, got {speed}")
-    spacing = tuple(float(s) for s in args.box_spacing)
-    if args.generate_box is not None:
-        sigma = args.ti * speed
-        if args.generator == "hipersim":
-            box = mann_box(1.0, args.length_scale, args.gamma, args.generate_box, spacing,
-                           seed=args.seed, periodic=True)
-            box = box.scaled(sigma / float(jnp.std(box.velocity[..., 0])))
-        else:
-            vel = fft_mann_box(args.generate_box, spacing, length_scale=args.length_scale,
-                               gamma=args.gamma, sigma_u=sigma, seed=args.seed)
-            box = TurbulenceBox(jnp.asarray(vel, mean.dtype), jnp.asarray(spacing, mean.dtype),
-                                periodic=(True, True))
-        info = (f"generated Mann box {args.generate_box} x {spacing} m ({args.generator}, "
-                f"L = {args.length_scale:g} m, Gamma = {args.gamma:g}, sigma_u = {sigma:.3g} m/s)")
-    else:
+    box = None
+    if args.generate_box is None:
         parts = args.box.split(",")
         if len(parts) == 1:
-            box = read_turbsim(parts[0]).box(speed)
+            box = parts[0]
         elif len(parts) == 3:
             if args.box_shape is None:
                 raise ValueError("HAWC2 boxes need --box-shape nx,ny,nz (and --box-spacing)")
-            box = read_hawc2_box(*parts, args.box_shape, spacing)
+            box = parts
         else:
             raise ValueError(f"--box must be one .bts file or three files u,v,w; got {args.box!r}")
-        info = f"box {args.box}"
-    field = FrozenTurbulence(mean, box, speed, direction, anchor=anchor)
-    return field, info + f", advected at {speed:.3g} m/s from {direction:.1f} deg"
+    return series_field(mean, location, speed=speed, direction=direction, box=box,
+                        box_shape=args.box_shape, box_spacing=args.box_spacing,
+                        generate_box=args.generate_box, length_scale=args.length_scale,
+                        gamma=args.gamma, ti=args.ti, seed=args.seed, generator=args.generator)

@@ -45,7 +45,6 @@ def register(sub) -> None:
     sim.set_defaults(func=run)
 
 
-
 def run(args) -> int:
     settings = read_settings(args.settings)
     betas = selected_betas(args, settings)
@@ -65,18 +64,10 @@ def run(args) -> int:
 
     sims = simulate_settings(settings, betas, field_for, scan, u_ref=args.u_ref, probe=probe,
                              pitch=args.pitch, roll=args.roll)
-    write_results(args, settings, sims, {b: str(p) for b, p in paths.items()})
+    write_seed_results(args.out, settings, sims, scan=args.scan, u_ref=args.u_ref,
+                       sources={b: str(p) for b, p in paths.items()},
+                       settings_file=args.settings, pitch=args.pitch, roll=args.roll, log=print)
     why = explain_nans(sims, fields, settings, paths)
     if why:
         print(f"lidarjax simulate: warning: {why}", file=sys.stderr)
     return 0
-
-
-def write_results(args, settings, sims, sources) -> None:
-    """`lidarjax.workflows.seed_results.write_seed_results` with the command's options,
-    printing its table. Shared with `lidarjax monitor-points --sampled`."""
-
-    write_seed_results(args.out, settings, sims, scan=args.scan, u_ref=args.u_ref,
-                       sources=sources, settings_file=args.settings,
-                       pitch=getattr(args, "pitch", 0.0), roll=getattr(args, "roll", 0.0),
-                       log=print)

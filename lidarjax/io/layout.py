@@ -4,7 +4,8 @@
 ``<name> <easting> <northing>`` separated by whitespace (or commas), metres in a projected
 (UTM) frame; blank lines and ``#`` comments are skipped. Names must be unique.
 
-**Turbine types**: a CSV of the thrust curve with the type's geometry in ``#`` header lines::
+**Turbine types**: FLORIS turbine-library or windIO turbine YAML files (`read_turbine_type`),
+or a CSV of the thrust curve with the type's geometry in ``#`` header lines::
 
     # rotor_diameter = 126      (m; also: diameter, rotor_diameter_m)
     # hub_height = 90           (m above the ground; also: hub_height_m)
@@ -32,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._util import PathLike, file_error, normalise_key, require_file
-from ..scenes.farm import wind_farm
+from .._util import PathLike, file_error, import_optional, normalise_key, require_file
+from ..scenes.farm import clip_thrust_curve, wind_farm
 
 __all__ = ["Layout", "TurbineType", "FarmLayout", "read_layout", "read_turbine_type",
            "read_farm", "check_spacing"]
@@ -127,12 +128,21 @@ def read_layout(path: PathLike) -> Layout:
 
 
 def read_turbine_type(path: PathLike) -> TurbineType:
-    """Read a turbine type CSV (see module docs): ``# rotor_diameter = ...``,
-    ``# hub_height = ...`` header lines and ``speed,ct`` columns.
+    """Read a turbine type: a CSV (see module docs: ``# rotor_diameter = ...``,
+    ``# hub_height = ...`` header lines and ``speed,ct`` columns), or a YAML file
+    (``.yaml``/``.yml``) in FLORIS's turbine-library layout (``hub_height``,
+    ``rotor_diameter``, ``power_thrust_table: {wind_speed, thrust_coefficient}``, e.g.
+    FLORIS's own ``nrel_5MW.yaml``) or windIO's plant turbine layout (``name``,
+    ``hub_height``, ``rotor_diameter``, ``performance: {Ct_curve: {Ct_wind_speeds,
+    Ct_values}}``). YAML needs PyYAML (extra ``farm``).
 
+    A thrust curve that leaves ``[0, 1)`` (FLORIS's NREL 5 MW reaches 1.13 below cut-in) is
+    clipped to ``[1e-4, 0.9999]`` as FLORIS clips it, with one warning naming the file.
     Raises `ValueError` naming the file (and line) for a missing diameter/hub height, missing
-    thrust-curve columns, non-numeric values, speeds not increasing or Ct outside [0, 1)."""
+    thrust-curve columns or keys, non-numeric values or speeds not increasing."""
     p = require_file(path, "turbine type file")
+    if p.suffix.lower() in (".yaml", ".yml"):
+        return _read_turbine_yaml(p)
     meta: dict[str, str] = {}
     body: list[tuple[int, str]] = []
     for number, raw in enumerate(p.read_text(encoding="utf-8-sig").splitlines(), start=1):
@@ -188,11 +198,69 @@ def read_turbine_type(path: PathLike) -> TurbineType:
     if np.any(np.diff(a[:, 0]) <= 0):
         k = int(np.argmax(np.diff(a[:, 0]) <= 0))
         raise file_error(p, body[k + 2][0], "thrust-curve speeds must be strictly increasing")
-    if np.any(a[:, 1] < 0) or np.any(a[:, 1] >= 1):
-        raise file_error(p, None, f"Ct must lie in [0, 1), found {a[:, 1].min():g}..{a[:, 1].max():g}")
+    ct = clip_thrust_curve(a[:, 1], str(p))
     if hub < 0.5 * diameter:
         raise file_error(p, None, f"hub height {hub:g} m is below the rotor radius {0.5 * diameter:g} m")
-    return TurbineType(p, p.stem, diameter, hub, a[:, 0], a[:, 1])
+    return TurbineType(p, p.stem, diameter, hub, a[:, 0], ct)
+
+
+def _read_turbine_yaml(p: Path) -> TurbineType:
+    """A FLORIS turbine-library or windIO plant turbine YAML (see `read_turbine_type`)."""
+    yaml = import_optional("yaml", "farm", f"Reading the turbine YAML {p}")
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8-sig"))
+    except yaml.YAMLError as err:
+        raise file_error(p, None, f"not valid YAML ({str(err).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise file_error(p, None, "expected a mapping with hub_height, rotor_diameter and a "
+                                  "thrust curve (FLORIS or windIO turbine)")
+    if isinstance(data.get("power_thrust_table"), dict):  # FLORIS turbine library
+        table, kind = data["power_thrust_table"], "FLORIS"
+        speed_key, ct_key, name = "wind_speed", "thrust_coefficient", data.get("turbine_type")
+    elif isinstance(data.get("performance"), dict) and isinstance(
+            data["performance"].get("Ct_curve"), dict):  # windIO plant turbine
+        table, kind = data["performance"]["Ct_curve"], "windIO"
+        speed_key, ct_key, name = "Ct_wind_speeds", "Ct_values", data.get("name")
+    else:
+        raise file_error(p, None, "no thrust curve: expected FLORIS's power_thrust_table "
+                                  "{wind_speed, thrust_coefficient} or windIO's performance: "
+                                  "{Ct_curve: {Ct_wind_speeds, Ct_values}}")
+
+    def number(key):
+        try:
+            v = float(data[key])
+        except KeyError:
+            raise file_error(p, None, f"{kind} turbine without {key!r} (metres)") from None
+        except (TypeError, ValueError):
+            raise file_error(p, None, f"{key} must be a number of metres, found "
+                                      f"{data[key]!r}") from None
+        if not (np.isfinite(v) and v > 0):
+            raise file_error(p, None, f"{key} must be positive metres, found {v:g}")
+        return v
+
+    diameter, hub = number("rotor_diameter"), number("hub_height")
+    try:
+        speed = np.asarray(table[speed_key], np.float64)
+        ct = np.asarray(table[ct_key], np.float64)
+    except KeyError as err:
+        raise file_error(p, None, f"{kind} thrust curve without {err.args[0]!r}") from None
+    except (TypeError, ValueError):
+        raise file_error(p, None, f"{kind} thrust curve: {speed_key} and {ct_key} must be "
+                                  "lists of numbers") from None
+    if speed.ndim != 1 or speed.shape != ct.shape or speed.size < 1:
+        raise file_error(p, None, f"{kind} thrust curve: {speed_key} and {ct_key} must be lists "
+                                  f"of one length, found {speed.shape} and {ct.shape}")
+    if not np.all(np.isfinite(speed)):
+        raise file_error(p, None, f"{kind} thrust curve: {speed_key} contains NaN or inf")
+    if np.any(np.diff(speed) <= 0):
+        raise file_error(p, None, "thrust-curve speeds must be strictly increasing")
+    try:
+        ct = clip_thrust_curve(ct, str(p))
+    except ValueError as err:
+        raise file_error(p, None, str(err).split(": ", 1)[-1]) from None
+    if hub < 0.5 * diameter:
+        raise file_error(p, None, f"hub height {hub:g} m is below the rotor radius {0.5 * diameter:g} m")
+    return TurbineType(p, str(name) if name else p.stem, diameter, hub, speed, ct)
 
 
 def check_spacing(names, easting, northing, diameter) -> None:

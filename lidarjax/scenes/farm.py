@@ -83,6 +83,7 @@ Gebraad et al. (2016), Wind Energy 19; IEC 61400-12-1 Annex A (see `lidarjax.dis
 from __future__ import annotations
 
 import copy
+import warnings
 
 import equinox as eqx
 import jax
@@ -451,6 +452,28 @@ def _is_1d(value) -> bool:
         return False
 
 
+#: FLORIS clips every thrust coefficient to this range before using it
+#: (``floris.core.turbine.operation_models``); lidarjax applies the same clip to curves that
+#: leave ``[0, 1)``, such as FLORIS's own NREL 5 MW curve (Ct up to 1.13 below cut-in).
+FLORIS_CT_BOUNDS = (1e-4, 0.9999)
+
+
+def clip_thrust_curve(ct, where: str) -> np.ndarray:
+    """`ct` (any shape) as float64, clipped to `FLORIS_CT_BOUNDS` as FLORIS does when some
+    value lies outside ``[0, 1)``, with one `UserWarning` naming `where` and the range found;
+    returned unchanged (no clip, no warning) when every value is in ``[0, 1)``. Non-finite
+    values raise `ValueError`."""
+    v = np.asarray(ct, np.float64)
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{where}: Ct contains NaN or inf.")
+    if v.size and (v.min() < 0.0 or v.max() >= 1.0):
+        lo, hi = FLORIS_CT_BOUNDS
+        warnings.warn(f"{where}: Ct {v.min():g}..{v.max():g} leaves [0, 1); clipped to "
+                      f"[{lo:g}, {hi:g}] as FLORIS does", UserWarning, stacklevel=3)
+        v = np.clip(v, lo, hi)
+    return v
+
+
 def _curves(ct, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Thrust curves as ``(n, m)`` speed and Ct arrays (host, float64)."""
     if isinstance(ct, int | float | np.floating) or (
@@ -477,10 +500,7 @@ def _curves(ct, n: int) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"wind_farm: thrust curve {k} contains NaN or inf.")
         if np.any(np.diff(s) <= 0):
             raise ValueError(f"wind_farm: thrust curve {k}: speeds must be strictly increasing.")
-        if np.any(v < 0) or np.any(v >= 1.0 + 1e-9):
-            raise ValueError(f"wind_farm: thrust curve {k}: Ct must lie in [0, 1), got "
-                             f"{v.min():g}..{v.max():g}.")
-        curves.append((s, v))
+        curves.append((s, clip_thrust_curve(v, f"wind_farm: thrust curve {k}")))
     m = max(c[0].size for c in curves)
     speeds = np.empty((n, max(m, 2)))
     values = np.empty((n, max(m, 2)))
@@ -523,8 +543,10 @@ def wind_farm(
       float32: they are stored relative to `origin`, computed in float64).
     - `hub_height`, `diameter`: hub heights above the ground datum `ground` and rotor
       diameters, m; scalars broadcast.
-    - `ct`: a constant thrust coefficient, a ``(speeds, ct)`` curve for all turbines, or a
-      list with one constant or curve per turbine (speeds in m/s, increasing).
+    - `ct`: a constant thrust coefficient in ``[0, 1)``, a ``(speeds, ct)`` curve for all
+      turbines, or a list with one constant or curve per turbine (speeds in m/s,
+      increasing). A curve that leaves ``[0, 1)`` (FLORIS's NREL 5 MW rises to 1.13 below
+      cut-in) is clipped to `FLORIS_CT_BOUNDS` as FLORIS does, with one warning.
     - `yaw`: misalignment in degrees (scalar or ``(i,)``), positive anticlockwise seen from
       above (FLORIS's sign): the rotor faces bearing ``direction - yaw``.
     - `speed`: free-stream speed at `z_ref` (m/s; default height: the mean hub height),

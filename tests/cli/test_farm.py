@@ -1,5 +1,7 @@
-"""Farm inputs and geometry: seed 004 layouts and turbine types, IEC disturbed sectors,
-nacelle scans (2-beam, 4-beam, shear), and the `lidarjax farm` command."""
+"""The `lidarjax farm` command, and the nacelle scans and mounts it builds on. Layout and
+turbine-type reading is tested in tests/io/test_layout.py, the IEC disturbed sectors in
+tests/core/test_disturbed_sectors.py and the study itself in
+tests/workflows/test_farm_study.py."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -7,18 +9,8 @@ import pytest
 
 import lidarjax as lj
 from lidarjax.cli import main
-from lidarjax.disturbed_sectors import disturbed_sectors, excluded_width, in_sectors, merge_sectors
-from lidarjax.io.layout import read_farm, read_layout, read_turbine_type
 
-TYPE = """# NREL 5 MW (abridged)
-# rotor_diameter = 126
-# hub_height = 90
-speed,ct
-3.0,0.0
-4.0,0.82
-11.4,0.72
-25.0,0.06
-"""
+from ..io.test_layout import TYPE
 
 
 @pytest.fixture
@@ -28,81 +20,6 @@ def files(tmp_path):
     (tmp_path / "b.txt").write_text("T101 253308.0 647985.0\n")
     (tmp_path / "t.csv").write_text(TYPE)
     return tmp_path
-
-
-def test_layout_and_type(files):
-    lay = read_layout(files / "a.txt")
-    assert lay.names == ("T001", "T002", "T003")
-    assert lay.easting[0] == 251865.0 and lay.northing[2] == 646900.0
-    t = read_turbine_type(files / "t.csv")
-    assert (t.diameter, t.hub_height) == (126.0, 90.0)
-    np.testing.assert_array_equal(t.ct, [0.0, 0.82, 0.72, 0.06])
-    farm = read_farm([files / "a.txt", files / "b.txt"], [files / "t.csv"])
-    assert farm.names[-1] == "T101" and farm.diameter.shape == (4,)
-    wf = farm.to_farm(speed=8.0)
-    # UTM coordinates relative to the first turbine, exact
-    assert float(wf.x[1]) == 375.0 and float(wf.y[1]) == -286.0
-    assert float(wf.origin[0] + wf.origin_lo[0]) == 251865.0
-
-
-@pytest.mark.parametrize("content,message", [
-    ("T1 1 2\nT1 3 4\n", "line 2: duplicate turbine name 'T1'"),
-    ("T1 1\n", "line 1: expected '<name> <easting> <northing>'"),
-    ("T1 1 x\n", "line 1: turbine 'T1': easting and northing must be numbers"),
-    ("# nothing\n", "no turbines"),
-])
-def test_layout_errors(tmp_path, content, message):
-    (tmp_path / "l.txt").write_text(content)
-    with pytest.raises(ValueError, match=message):
-        read_layout(tmp_path / "l.txt")
-
-
-@pytest.mark.parametrize("content,message", [
-    (TYPE.replace("speed,ct", "speed,power"), "missing thrust-curve column 'ct'"),
-    (TYPE.replace("speed,ct", "u_hub,ct"), "missing thrust-curve column 'speed'"),
-    (TYPE.replace("# hub_height = 90\n", ""), "missing '# hubheight"),
-    (TYPE.replace("4.0,0.82", "2.0,0.82"), "strictly increasing"),
-    (TYPE.replace("4.0,0.82", "4.0,1.3"), r"Ct must lie in \[0, 1\)"),
-])
-def test_type_errors(tmp_path, content, message):
-    (tmp_path / "t.csv").write_text(content)
-    with pytest.raises(ValueError, match=message):
-        read_turbine_type(tmp_path / "t.csv")
-
-
-def test_farm_errors(files):
-    (files / "c.txt").write_text("T001 0 0\n")
-    with pytest.raises(ValueError, match="duplicate turbine name 'T001'"):
-        read_farm([files / "a.txt", files / "c.txt"], files / "t.csv")
-    (files / "d.txt").write_text("A 0 0\nB 100 0\n")
-    with pytest.raises(ValueError, match="A and B are 100.0 m apart, closer than one rotor"):
-        read_farm(files / "d.txt", files / "t.csv")
-
-
-# ----------------------------------------------------------------------------- sectors
-def test_excluded_width_iec():
-    # IEC 61400-12-1 Annex A: 2 D -> 80.8 deg, 5 D -> 52.9 deg, 20 D -> 30.0 deg
-    assert excluded_width(2 * 80.0, 80.0) == pytest.approx(80.80, abs=0.01)
-    assert excluded_width(5 * 80.0, 80.0) == pytest.approx(52.93, abs=0.01)
-    assert excluded_width(20 * 80.0, 80.0) == pytest.approx(29.99, abs=0.01)
-    assert excluded_width(0.5 * 80.0, 80.0) == excluded_width(2 * 80.0, 80.0)  # clamped below 2 D
-    s = disturbed_sectors([0, 0], [0.0, 100.0, 0.0, 3000.0], [500.0, 0.0, -1e-4, 0.0], 100.0,
-                          ["N", "E", "self", "far"])
-    names = [x.name for x in s]
-    assert names == ["N", "E", "far"]  # the lidar's own turbine is skipped
-    assert s[0].bearing == pytest.approx(0.0) and s[1].bearing == pytest.approx(90.0)
-    assert s[1].too_close and not s[0].too_close and not s[2].considered
-    merged = merge_sectors(s)
-    assert len(merged) == 2  # far turbine ignored; N and E do not overlap (45 + 40 < 90)
-    assert merged[-1][0] == pytest.approx(360 - s[0].width / 2)  # N wraps through 0
-    assert in_sectors([0.0, 90.0, 180.0], merged).tolist() == [True, True, False]
-
-
-def test_merge_wraps_and_overlaps():
-    assert merge_sectors([(350.0, 10.0), (5.0, 20.0), (100.0, 120.0), (110.0, 130.0)]) == [
-        (100.0, 130.0), (350.0, 380.0)]
-    assert merge_sectors([(0.0, 200.0), (190.0, 370.0)]) == [(0.0, 360.0)]
-    assert in_sectors([355.0, 15.0, 25.0], [(350.0, 380.0)]).tolist() == [True, True, False]
 
 
 # ------------------------------------------------------------------------ nacelle scans
