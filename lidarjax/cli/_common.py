@@ -30,7 +30,8 @@ from pathlib import Path
 import jax
 
 from .. import scan as scans
-from ..io.seed_output import format_number
+from .._util import format_number
+from ..io.openfoam import is_openfoam_case
 from ..probe import CWProbe, PulsedProbe
 
 SCAN_CHOICES = ("windcube_v1", "windcube_v2", "zephir")
@@ -346,7 +347,12 @@ def field_paths(args, betas):
         raise ValueError(f"--field {args.field!r} must contain '{{beta}}' to name one CFD run "
                          "per platform rotation (e.g. 'runs/platform_{beta}.npz')")
     paths = {b: Path(field_pattern(args.field, format_number(b))) for b in betas}
-    missing = [str(p) for p in paths.values() if not p.is_file()]
+    missing = [str(p) for p in paths.values() if not (p.is_file() or p.is_dir())]
     if missing:
         raise FileNotFoundError(f"CFD field file(s) not found: {', '.join(missing)}")
+    folders = [str(p) for p in paths.values() if p.is_dir() and not is_openfoam_case(p)]
+    if folders:
+        raise ValueError(f"--field {folders[0]}: a folder that is not an OpenFOAM case (no "
+                         "constant/polyMesh, plain or in processor0/) nor one of its time "
+                         "folders; give a case folder, CASE/<time>, or a field file")
     return paths

@@ -10,9 +10,9 @@ import argparse
 import sys
 
 from ..io import read_settings
-from ..io.fields import load_field
+from ..io.fields import check_field_file, load_field
 from ..workflows.seed_results import explain_nans, seed_result_files, write_seed_results
-from ..workflows.seed_tables import simulate_settings
+from ..workflows.seed_tables import simulate_settings, table_region
 from ._common import (
     add_run_arguments,
     add_tilt_arguments,
@@ -58,8 +58,14 @@ def run(args) -> int:
     check_output_folder(args.out, files=seed_result_files(betas), inputs=inputs)
     fields = {}
 
+    for path in paths.values():  # every file's format checked before computing
+        check_field_file(path)
+
     def field_for(b):
-        fields[b] = load_field(paths[b])
+        # each run read only where its beams look, as `lidarjax table` reads it (a GridField
+        # crop is bit-exact; an OpenFOAM or VTK mesh is resampled over that region only)
+        region = table_region(settings, [b], scan, probe=probe, pitch=args.pitch, roll=args.roll)
+        fields[b] = load_field(paths[b], region=region)
         return fields[b]
 
     sims = simulate_settings(settings, betas, field_for, scan, u_ref=args.u_ref, probe=probe,

@@ -60,19 +60,33 @@ _ZERO_GRADIENT_TYPES = ("zeroGradient", "calculated", "extrapolatedCalculated", 
 _SLIP_TYPES = ("slip", "symmetry", "symmetryPlane", "partialSlip", "wedge")
 
 
-def is_openfoam_case(path: PathLike) -> bool:
-    """Whether `path` is an OpenFOAM case directory (has `constant/polyMesh` or
-    `processor0/constant/polyMesh`), or a file inside one's root (`system/controlDict`,
-    `case.foam`)."""
-    p = Path(path)
-    if p.is_file() and (p.suffix in (".foam", ".OpenFOAM") or p.name == "controlDict"):
-        p = p.parent.parent if p.name == "controlDict" else p.parent
+def _has_mesh(p: Path) -> bool:
     return p.is_dir() and ((p / "constant" / "polyMesh").is_dir()
                            or (p / "processor0" / "constant" / "polyMesh").is_dir())
 
 
-def _case_dir(path: PathLike) -> Path:
+def case_and_time(path: PathLike) -> tuple[Path, str | None]:
+    """The case directory of `path` and the time `path` names, if any: a case directory
+    (plain or decomposed), its ``system/controlDict`` or a ``case.foam`` in it give
+    ``(case, None)``; a time directory of the case (``CASE/400``) gives ``(CASE, "400")``.
+    The path is returned as given when it is none of these (the readers then say why)."""
     p = Path(path)
+    if p.is_file() and (p.suffix in (".foam", ".OpenFOAM") or p.name == "controlDict"):
+        return (p.parent.parent if p.name == "controlDict" else p.parent), None
+    if p.is_dir() and not _has_mesh(p) and _is_time_name(p.name) and _has_mesh(p.parent):
+        return p.parent, p.name
+    return p, None
+
+
+def is_openfoam_case(path: PathLike) -> bool:
+    """Whether `path` is an OpenFOAM case directory (has `constant/polyMesh` or
+    `processor0/constant/polyMesh`), a file inside one's root (`system/controlDict`,
+    `case.foam`), or one of its time directories (`CASE/400`)."""
+    return _has_mesh(case_and_time(path)[0])
+
+
+def _case_dir(path: PathLike) -> Path:
+    p = case_and_time(path)[0]
     if p.is_file() and p.name == "controlDict":
         p = p.parent.parent
     elif p.is_file():
@@ -316,15 +330,19 @@ def read_openfoam_field(case: PathLike, *, field: str = "U", time: Any = None) -
 
     **Arguments:**
 
-    - `case`: the case directory (or its `system/controlDict`, or a `case.foam` file in it).
+    - `case`: the case directory (plain or decomposed), its `system/controlDict`, a
+      `case.foam` file in it, or one of its time directories (`CASE/400`: that time).
     - `field`: the volVectorField's file name.
-    - `time`: a time (number) or time-directory name; default the latest holding `field`.
+    - `time`: a time (number) or time-directory name; default the time directory `case`
+      names, else the latest holding `field`.
 
     Raises `ValueError` naming the file (and line) for a missing field, no time directory,
     a corrupt or truncated file, or a decomposed case without `decomposePar`'s addressing.
     A decomposed case (`processor*/` only) is merged into the undecomposed mesh.
     """
     p = _case_dir(case)
+    if time is None:
+        time = case_and_time(case)[1]
     if _is_decomposed(p):
         for what in ("pointProcAddressing", "faceProcAddressing", "cellProcAddressing"):
             if resolve_file(p / "processor0" / "constant" / "polyMesh" / what) is None:
