@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 
 import jax
+import numpy as np
 
 __all__: list[str] = []
 
@@ -118,3 +119,15 @@ def default_batch(kind: str, bytes_per_item: float, n_items: int, *, device=None
     cpu = CPU_BATCH[kind]
     want = whole if cpu is None else cpu
     return want if want <= fit else floor_bucket(fit)
+
+
+def positive_size(value, fname: str, name: str, alternatives: str = "or None (chosen per "
+                  "backend)") -> int:
+    """`value` as a positive int (an int or an integral float), else a `ValueError` naming
+    `fname`'s argument `name` and what else it accepts (`alternatives`)."""
+    number = isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+        value, bool)
+    if not number or not float(value).is_integer() or value < 1:
+        raise ValueError(f"{fname}: `{name}` must be a positive int {alternatives}, got "
+                         f"{value!r}.")
+    return int(value)

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import default_float, is_concrete, split
+from ._precision import default_float, difference, is_concrete, split
 
 __all__ = ["AbstractField", "GridField", "TimeSampler", "SteadySampler", "DirectSampler"]
 
@@ -65,11 +65,12 @@ class AbstractField(eqx.Module):
             o64 = np.asarray(self.origin, np.float64) + np.asarray(self.origin_lo, np.float64)
             return self.sample_local(jnp.asarray((p64 - o64).astype(dtype)))
         points = jnp.asarray(points)
-        local = (points.astype(dtype) - self.origin) - self.origin_lo
-        if jnp.dtype(points.dtype).itemsize > jnp.dtype(dtype).itemsize:
-            # the input is wider than the field: subtract in its precision first
-            local = (points - self.origin.astype(points.dtype)).astype(dtype) - self.origin_lo
-        return self.sample_local(local)
+        if not jnp.issubdtype(points.dtype, jnp.floating):
+            points = points.astype(dtype)
+        # points wider than the field are split into the field's dtype first; the high parts
+        # are subtracted exactly whatever the compiler fuses (`lidarjax._precision`)
+        zero = jnp.zeros((), dtype)
+        return self.sample_local(difference(points, zero, self.origin, self.origin_lo, dtype))
 
     def los_local(
         self, points: Float[Array, "... 3"], directions: Float[Array, "... 3"]

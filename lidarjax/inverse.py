@@ -46,7 +46,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._backend import CPU_BATCH, bucket, default_batch
+from ._backend import CPU_BATCH, bucket, default_batch, positive_size
 from ._precision import default_float, is_concrete
 from .flags import InverseFlag
 from .response import PeriodicSpline, ResponseTable, locate
@@ -309,21 +309,18 @@ def _batching(batch_size, n, h, b, n_directions, itemsize, fname):
     record count, a `bucket` (so campaigns of different lengths share few compilations)."""
     if batch_size is None:
         problems = default_batch("invert", _problem_bytes(h, b, n_directions, itemsize), n * h)
-    elif isinstance(batch_size, str):
-        if batch_size != "all":
-            raise ValueError(f"{fname}: `batch_size` must be a positive int, 'all' or None "
-                             f"(chosen per backend), got {batch_size!r}.")
+    elif isinstance(batch_size, str) and batch_size == "all":
         problems = None
     else:
-        if isinstance(batch_size, bool) or int(batch_size) != batch_size or int(batch_size) < 1:
-            raise ValueError(f"{fname}: `batch_size` must be a positive int, 'all' or None "
-                             f"(chosen per backend), got {batch_size!r}.")
-        problems = int(batch_size)
+        problems = positive_size(batch_size, fname, "batch_size",
+                                 "(problems per batch), 'all' or None (chosen per backend)")
     per_batch = None if problems is None else max(1, problems // h)
     if per_batch is None or n <= per_batch:
         n_pad = bucket(n) if per_batch is None else min(bucket(n), per_batch)
         return None, max(n_pad, n)
     return per_batch, bucket(-(-n // per_batch)) * per_batch
+
+
 def _cast_floats(tree, dtype):
     return jax.tree_util.tree_map(
         lambda a: a.astype(dtype)

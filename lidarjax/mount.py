@@ -135,10 +135,7 @@ class Mount(eqx.Module):
             hi, lo = jnp.broadcast_to(hi, (n, 3)), jnp.broadcast_to(lo, (n, 3))
         self.location, self.location_lo = hi, lo
         for name, val in angles.items():
-            a = jnp.asarray(val, dtype=_dtype_of(val))
-            if n is not None and a.ndim == 0:
-                a = jnp.broadcast_to(a, (n,))
-            setattr(self, name, a)
+            setattr(self, name, _leaf(val, n))
 
     @property
     def batch_shape(self) -> tuple[int, ...]:
@@ -162,6 +159,17 @@ class Mount(eqx.Module):
             if not -s <= int(index) < s:
                 raise IndexError(f"Mount: index {int(index)} out of range for {s} mounts.")
         return jax.tree_util.tree_map(lambda x: x[index], self)
+
+
+def _leaf(value, n):
+    """An angle as a JAX array of its dtype (`_dtype_of`), broadcast to ``(n,)`` for a batch
+    (`n` not None). Host numbers go through numpy first: one transfer, no dispatched cast."""
+    dtype = _dtype_of(value)
+    if isinstance(value, jax.Array):  # JAX arrays and tracers
+        a = jnp.asarray(value, dtype=dtype)
+        return a if n is None or a.ndim else jnp.broadcast_to(a, (n,))
+    a = np.asarray(value, dtype=dtype)
+    return jnp.asarray(a if n is None or a.ndim else np.broadcast_to(a, (n,)))
 
 
 def _dtype_of(value):

@@ -360,7 +360,9 @@ class ResponseTable(eqx.Module):
                 "ResponseTable.from_simulations (or `beam_vectors=`)."
             )
         p = self.point_at(direction)
-        return jnp.einsum("...hk,bk->...hb", p, self.beam_vectors)
+        # full float32 on GPUs (not TensorFloat-32): see `lidarjax.forward._simulate`
+        return jnp.einsum("...hk,bk->...hb", p, self.beam_vectors,
+                          precision=jax.lax.Precision.HIGHEST)
 
     # ----------------------------------------------------------------------------------------
     @classmethod

@@ -66,7 +66,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._backend import default_batch
+from ._backend import default_batch, positive_size
 from .angles import heading, horizontal_speed, wind_direction, wrap180
 from .batch import _is_stacked, _n_stacked, rotation_arguments, unstack_field
 from .corrections import DEFAULT_RATIO_TOL
@@ -864,10 +864,8 @@ def uncertainty(
         per_sample = (np.dtype(heights.dtype).itemsize * (n_sectors or 1) * heights.shape[0]
                       * scan.n_beams * int(getattr(probe, "n_nodes", 1)) * 256)
         mc_batch_size = default_batch("monte_carlo", per_sample, max(n_mc, 1))
-    elif isinstance(mc_batch_size, bool) or int(mc_batch_size) != mc_batch_size \
-            or int(mc_batch_size) < 1:
-        raise ValueError(f"{fname}: `mc_batch_size` must be a positive int or None (chosen per "
-                         f"backend), got {mc_batch_size!r}.")
+    else:
+        mc_batch_size = positive_size(mc_batch_size, fname, "mc_batch_size")
     if key is None:
         key = jax.random.PRNGKey(0)
     elif isinstance(key, int | np.integer):

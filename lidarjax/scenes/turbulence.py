@@ -30,14 +30,22 @@ differentiable; `jax.vmap` over time works.
 
 **Float32 over long advections.** ``U t`` reaches kilometres in a 10-minute record (hundreds of
 km over a day) while the box resolves a fraction of a metre. The advected distance is reduced
-modulo ``Lx`` exactly: the product ``U t`` is split into its rounded value plus the exact
-rounding error (Dekker's two-product), the rounded value is reduced by ``lax.rem`` (exact in
-IEEE arithmetic) and the error added back, so the position in the box keeps the resolution of a
-float32 coordinate *inside the box* (``ulp(Lx)``, 0.5 mm for an 8 km box) whatever ``t``,
-rather than ``ulp(U t)``. Time itself is read in the working dtype: a float32 ``t`` of 3600 s
-resolves 0.24 ms (2.4 mm at 10 m/s); for absolute times of days or more, advance the field to
-the record start first with `FrozenTurbulence.advanced` (reduced in float64 on the host) and
-pass times within the record.
+modulo ``Lx`` without ever rounding ``U t`` (`advected_distance`): ``U`` and ``t`` are each
+split exactly into a high part with 12 significant bits and a low part with 11
+(`lidarjax._precision.split_bits`: power-of-two quantisation with ``rint``), so the four
+partial products ``U_hi t_hi``, ``U_hi t_lo``, ``U_lo t_hi`` and ``U_lo t_lo`` are *exact*
+float32 numbers; the three large ones are reduced by ``lax.rem`` (exact in IEEE arithmetic)
+and the pieces, each smaller than ``Lx``, summed. The position in the box thus keeps the
+resolution of a float32 coordinate *inside the box* (a few ``ulp(Lx)``, 0.5 mm each for an
+8 km box) whatever ``t``, rather than ``ulp(U t)``. This holds under a fusing compiler too:
+XLA on GPU contracts ``a * b + c`` into FMAs, and ``--xla_cpu_enable_fast_math`` also
+reassociates sums; every product here is exact, so an FMA computes the same number, and the
+only sums left are of box-sized terms, whose order does not matter at that resolution. (The
+former formulation, Dekker's two-product, needs every product rounded on its own: an FMA in
+its ``c * x`` splitting silently drops the error term.) Time itself is read in the working
+dtype: a float32 ``t`` of 3600 s resolves 0.24 ms (2.4 mm at 10 m/s); for absolute times of
+days or more, advance the field to the record start first with `FrozenTurbulence.advanced`
+(reduced in float64 on the host) and pass times within the record.
 
 **Reading other codes' boxes.** HAWC2 and OpenFAST's InflowWind sweep a Mann box through the
 turbine in *increasing* box ``x`` (Wise and Bachynski 2020, appendix), i.e. they see the mirror
@@ -57,7 +65,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._deprecated import deprecated_getattr
-from .._precision import is_concrete
+from .._precision import is_concrete, split_bits
 from ..angles import heading
 from ..field import AbstractField, TimeSampler
 from ..frames import rotate
@@ -66,33 +74,39 @@ from ..turbulence import TurbulenceBox, box_axis
 __all__ = ["FrozenTurbulence", "frozen_turbulence"]
 
 
-def _two_product(a, b):
-    """``a * b = p + e`` with ``p`` the rounded product and ``e`` its exact rounding error
-    (Dekker 1971; no FMA needed). Works in any binary floating dtype."""
-    bits = jnp.finfo(a.dtype).nmant + 1
-    c = float(2 ** ((bits + 1) // 2) + 1)
-
-    def split(x):
-        y = c * x
-        hi = y - (y - x)
-        return hi, x - hi
-
-    p = a * b
-    ah, al = split(a)
-    bh, bl = split(b)
-    e = ((ah * bh - p) + ah * bl + al * bh) + al * bl
-    return p, e
-
-
+@jax.custom_jvp
 def advected_distance(speed, time, length):
-    """``speed * time`` reduced modulo `length` (m), accurate to the resolution of `length`
-    rather than of the product: the rounded product is reduced exactly by ``lax.rem`` and its
-    exact rounding error added back. Result in about ``(-length, length)``; its derivatives
-    are those of ``speed * time``."""
+    """``speed * time`` reduced modulo `length` (m), accurate to a few ulp of `length` rather
+    than to the rounding of the product, also under FMA contraction and reassociation (see
+    the module docs): ``speed`` and ``time`` are split exactly into half-precision parts, the
+    partial products (all exact) reduced by ``lax.rem`` and summed. Result in about
+    ``(-length, length)``; its derivatives are those of ``speed * time`` (and ``-n`` with
+    respect to `length`, ``n`` the number of whole periods removed, as for ``lax.rem``)."""
     speed, time = jnp.broadcast_arrays(speed, time)
-    p, e = _two_product(speed, time)
-    red = jax.lax.rem(p, length.astype(p.dtype))
-    return red + jax.lax.stop_gradient(e)
+    dtype = jnp.result_type(speed, time)
+    speed, time = speed.astype(dtype), time.astype(dtype)
+    length = jnp.asarray(length).astype(dtype)
+    bits = (jnp.finfo(dtype).nmant + 1) // 2  # 12 for float32, 26 for float64: exact products
+    uh, ul = split_bits(speed, bits)
+    th, tl = split_bits(time, bits)
+
+    def rem(x):
+        return jax.lax.rem(x, length)
+
+    big = rem(rem(uh * th) + rem(uh * tl))
+    return rem(big + (rem(ul * th) + ul * tl))
+
+
+@advected_distance.defjvp
+def _advected_distance_jvp(primals, tangents):
+    speed, time, length = primals
+    d_speed, d_time, d_length = tangents
+    out = advected_distance(speed, time, length)
+    dtype = out.dtype
+    speed, time, length = (jnp.asarray(a).astype(dtype) for a in primals)
+    periods = jnp.round((speed * time - out) / length)
+    tangent = d_speed * time + speed * d_time - periods * d_length
+    return out, jnp.broadcast_to(tangent, out.shape).astype(dtype)
 
 
 class FrozenTurbulence(AbstractField):
@@ -247,6 +261,9 @@ class FrozenTurbulence(AbstractField):
 LINE_BUDGET = 2**25
 #: Points per chunk when building lines (the build's (nx, chunk, 3) intermediate).
 _LINE_CHUNK = 2048
+#: Precision of the lines' projections: full float32 on GPUs, where a DEFAULT float32 `dot`
+#: runs in TensorFloat-32 (10-bit mantissa: 5e-4 of the fluctuation off).
+_FULL = jax.lax.Precision.HIGHEST
 
 
 class _LineSampler(TimeSampler):
@@ -290,8 +307,8 @@ class _LineSampler(TimeSampler):
             c1 = vel[:, jy1, jz0] * (1 - gz) + vel[:, jy1, jz1] * gz
             line = c0 * (1 - gy) + c1 * gy  # (nx, C, 3), box axes
             if directions is not None:
-                return jnp.einsum("xpc,pc->px", line, c)  # (C, nx)
-            return jnp.einsum("xpc,cj->pxj", line, axes)  # (C, nx, 3), CFD frame
+                return jnp.einsum("xpc,pc->px", line, c, precision=_FULL)  # (C, nx)
+            return jnp.einsum("xpc,cj->pxj", line, axes, precision=_FULL)  # (C, nx, 3), CFD
 
         # in chunks of points, so the (nx, points, 3) intermediate stays small
         per = (iy0, iy1, fy, iz0, iz1, fz, proj)

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._backend import default_batch
+from .._backend import default_batch, positive_size
 from .._util import import_optional
 from ..angles import horizontal_speed, seed_azimuth
 from ..batch import simulate_rotations, stack_fields
@@ -116,6 +116,8 @@ def simulate_settings(
     vmapped batches; otherwise one call per run (one compilation per distinct grid shape).
     """
     betas = [float(b) for b in betas]
+    if batch_size is not None:
+        batch_size = positive_size(batch_size, "simulate_settings", "batch_size")
     mount = settings_mount(settings, betas, pitch=pitch, roll=roll)
     heights = jnp.asarray(settings.heights())
     fields = [field_for_beta(b) for b in betas]
@@ -123,9 +125,6 @@ def simulate_settings(
     if batch_size is None:  # the stacked copy and the vmapped temporaries of one run
         per_run = 2 * getattr(fields[0], "nbytes", 0) + 1
         batch_size = default_batch("rotations", per_run, n)
-    elif isinstance(batch_size, bool) or int(batch_size) != batch_size or int(batch_size) < 1:
-        raise ValueError(f"simulate_settings: `batch_size` must be a positive int or None "
-                         f"(chosen per backend), got {batch_size!r}.")
     size = min(int(batch_size), n)
     out: dict[float, Simulation] = {}
     for i in range(0, n, size):  # the last batch padded with its last run: one compilation

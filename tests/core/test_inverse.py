@@ -315,3 +315,72 @@ def test_exact_model_records_are_recovered_on_nonuniform_distorted_tables(speed,
     np.testing.assert_allclose(inv.speed, speed, rtol=1e-8)
     np.testing.assert_allclose(lj.wrap180(inv.direction - direction), 0.0, atol=1e-6)
     assert np.all(inv.num_steps <= 8)
+
+
+# -- per-backend batches and bucketed shapes (issue 18) ---------------------------------------
+def _count_traces(monkeypatch):
+    """Count the traces of `invert`'s compiled core (each traces `_solve_batch` once)."""
+    import lidarjax.inverse as inverse
+
+    calls = []
+    original = inverse._solve_batch
+
+    def counting(*args):
+        calls.append(args[0].shape)
+        return original(*args)
+
+    monkeypatch.setattr(inverse, "_solve_batch", counting)
+    return calls
+
+
+@pytest.mark.parametrize("batch_size,lengths,most", [
+    (32, (9, 12, 17, 20, 23), 2),  # 8 records per batch: 2, 2, 3, 3, 3 batches -> 2 shapes
+    (None, (5, 6, 7, 8, 11), 3),  # one batch (512 problems on CPU): 6, 6, 8, 8, 12 records
+])
+def test_campaigns_of_different_lengths_compile_a_few_times(table, random_records, monkeypatch,
+                                                            batch_size, lengths, most):
+    """Five files of different lengths: a handful of compilations (padded to buckets with
+    dummy records), and each file's results are those of an unpadded solve."""
+    sims, _, _ = random_records
+    los = np.asarray(sims.los)
+    calls = _count_traces(monkeypatch)
+    kw = dict(batch_size=batch_size, max_steps=29)  # a configuration no other test compiles
+    results = {n: lj.invert(table, los[:n], **kw) for n in lengths}
+    assert 1 <= len(calls) <= most, calls
+    # without buckets (inside jit the shapes are the caller's) the results are the same ...
+    for n in (lengths[0], lengths[-1]):
+        exact = jax.jit(lambda x: lj.invert(table, x, **kw))(jnp.asarray(los[:n]))
+        for a, b in zip(jax.tree_util.tree_leaves(results[n]), jax.tree_util.tree_leaves(exact),
+                        strict=True):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
+    # ... and every length gives each record the same answer
+    longest = results[lengths[-1]]
+    for n, inv in results.items():
+        assert inv.speed.shape == (n, table.n_heights) and np.all(inv.converged)
+        for a, b in zip(jax.tree_util.tree_leaves(inv), jax.tree_util.tree_leaves(longest),
+                        strict=True):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b)[:n], rtol=1e-12, atol=1e-12)
+    # leading axes of any shape share the same compilations
+    calls.clear()
+    m = lengths[-2]
+    twod = lj.invert(table, los[:m].reshape(2, m // 2, *los.shape[1:]), **kw)
+    assert twod.speed.shape == (2, m // 2, table.n_heights)
+    assert not calls  # the bucket of m records is compiled already
+    np.testing.assert_allclose(twod.speed.reshape(m, -1), longest.speed[:m], rtol=1e-12)
+
+
+def test_batch_size_all_and_validation(table, random_records):
+    sims, _, _ = random_records
+    los = np.asarray(sims.los[:10])
+    every = lj.invert(table, los, batch_size="all")
+    small = lj.invert(table, los, batch_size=8)  # 2 records per batch, 5 batches (padded to 6)
+    auto = lj.invert(table, los)
+    for a, b, c in zip(jax.tree_util.tree_leaves(every), jax.tree_util.tree_leaves(small),
+                       jax.tree_util.tree_leaves(auto), strict=True):
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(c), np.asarray(a), rtol=1e-12, atol=1e-12)
+    for bad in (0, -5, 2.5, "everything"):
+        with pytest.raises(ValueError, match="`batch_size` must be a positive int"):
+            lj.invert(table, los, batch_size=bad)
+        with pytest.raises(ValueError, match="invert_reconstructed: `batch_size`"):
+            lj.invert_reconstructed(table, np.ones(4), np.ones(4), batch_size=bad)

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import lidarjax as lj
+from lidarjax.batch import unstack_mounts
 from lidarjax.frames import tilt_rotation
 
 from ..helpers import assert_grad_matches_fd
@@ -236,3 +237,119 @@ def test_tilt_follows_float32():
     sim = lj.simulate(scene, lj.windcube_v1(), mount, np.array([50.0], np.float32))
     assert sim.los.dtype == jnp.float32
     assert np.all(np.isfinite(np.asarray(sim.lidar_velocity)))
+
+
+# -- batched mounts (issue 18): a leading axis of s mounts, built from arrays ------------------
+def _scalar_mounts(loc, angles):
+    s = loc.shape[0]
+    return [lj.Mount(loc[k], **{a: v[k] for a, v in angles.items()}) for k in range(s)]
+
+
+def test_batched_mount_equals_stacked_single_mounts_leaf_by_leaf():
+    rng = np.random.default_rng(18)
+    s = 7
+    loc = rng.uniform(-50, 50, (s, 3))
+    angles = {a: rng.uniform(-180, 180, s) for a in ("beta", "gamma", "psi", "epsilon")}
+    angles |= {"pitch": rng.uniform(-10, 10, s), "roll": rng.uniform(-10, 10, s)}
+    batched = lj.Mount(loc, **angles)
+    assert batched.batch_shape == (s,) and batched.n_mounts == s
+    assert lj.Mount(loc[0]).batch_shape == () and lj.Mount(loc[0]).n_mounts == 1
+    stacked = lj.stack_mounts(_scalar_mounts(loc, angles))
+    for a, b in zip(jax.tree_util.tree_leaves(batched), jax.tree_util.tree_leaves(stacked),
+                    strict=True):
+        assert a.shape == b.shape and a.dtype == b.dtype == jnp.float64
+        np.testing.assert_array_equal(a, b)
+    # indexing and iteration give the single mounts back, exactly
+    for k, m in enumerate(batched):
+        assert m.batch_shape == ()
+        for a, b in zip(jax.tree_util.tree_leaves(m),
+                        jax.tree_util.tree_leaves(_scalar_mounts(loc, angles)[k]), strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert len(list(batched)) == s and len(unstack_mounts(batched)) == s
+    np.testing.assert_array_equal(batched[-1].beta, angles["beta"][-1])
+    np.testing.assert_array_equal(batched[2:5].beta, angles["beta"][2:5])
+    np.testing.assert_array_equal(batched[np.array([4, 0])].location, loc[[4, 0]])
+
+
+def test_batched_mount_broadcasts_scalars_and_a_shared_location():
+    betas = np.array([0.0, 90.0, 180.0])
+    m = lj.Mount([1.0, 2.0, 3.0], beta=betas, psi=180.0)  # one location, three rotations
+    assert m.location.shape == m.location_lo.shape == (3, 3)
+    assert all(getattr(m, a).shape == (3,) for a in ("beta", "gamma", "psi", "epsilon", "pitch",
+                                                        "roll"))
+    np.testing.assert_array_equal(m.location, np.tile([1.0, 2.0, 3.0], (3, 1)))
+    np.testing.assert_array_equal(m.psi, [180.0] * 3)
+    np.testing.assert_array_equal(m.gamma, [0.0] * 3)
+    # a batch of locations alone, every angle shared
+    locs = np.arange(6.0).reshape(2, 3)
+    m2 = lj.Mount(locs, epsilon=5.0)
+    assert m2.batch_shape == (2,) and m2.epsilon.shape == (2,)
+    # a batch of one is a batch
+    assert lj.Mount([0.0, 0.0, 0.0], beta=[10.0]).batch_shape == (1,)
+
+
+def test_batched_mount_validation_messages():
+    z = np.zeros((3, 3))
+    with pytest.raises(ValueError, match=r"batch sizes differ \(\{'location': 3, 'beta': 2\}\)"):
+        lj.Mount(z, beta=[1.0, 2.0])
+    with pytest.raises(ValueError, match=r"batch sizes differ.*'gamma': 4"):
+        lj.Mount([0.0, 0.0, 0.0], beta=[1.0, 2.0], gamma=np.zeros(4))
+    with pytest.raises(ValueError, match=r"`location`.*shape \(3,\), or \(s, 3\).*got shape \(3, 2\)"):
+        lj.Mount(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match=r"got shape \(2, 3, 3\)"):
+        lj.Mount(np.zeros((2, 3, 3)))
+    with pytest.raises(ValueError, match=r"`pitch` must be one angle.*\(s,\).*shape \(3, 1\)"):
+        lj.Mount(z, pitch=np.zeros((3, 1)))
+    with pytest.raises(ValueError, match="empty batch"):
+        lj.Mount(np.zeros((0, 3)))
+    bad = z.copy()
+    bad[2, 1] = np.nan
+    with pytest.raises(ValueError, match=r"`location` must be finite; mount 2"):
+        lj.Mount(bad)
+    with pytest.raises(ValueError, match=r"`roll` must be finite angles in degrees; mount 1 has inf"):
+        lj.Mount(z, roll=[0.0, np.inf, 0.0])
+    with pytest.raises(ValueError, match=r"`beta` must be a finite angle"):
+        lj.Mount([0.0, 0.0, 0.0], beta=np.nan)
+    with pytest.raises(TypeError, match="one mount, not a batch"):
+        lj.Mount([0.0, 0.0, 0.0])[0]
+    with pytest.raises(IndexError, match="index 3 out of range for 3 mounts"):
+        lj.Mount(z)[3]
+
+
+def test_batched_location_keeps_float64_accuracy_in_float32():
+    """The high/low split of UTM-sized locations works row by row for a batch."""
+    utm = np.array([[512_345.678, 6_123_456.789, 21.0], [512_401.123, 6_123_470.456, 35.5]])
+    with jax.enable_x64(False):
+        batched = lj.Mount(utm, beta=[10.0, 20.0])
+        singles = [lj.Mount(utm[k], beta=b) for k, b in enumerate((10.0, 20.0))]
+        assert batched.location.dtype == batched.location_lo.dtype == jnp.float32
+        assert batched.beta.dtype == jnp.float32
+        total = np.asarray(batched.location, np.float64) + np.asarray(batched.location_lo,
+                                                                       np.float64)
+        np.testing.assert_allclose(total, utm, rtol=0, atol=1e-8)
+        assert np.any(np.asarray(batched.location_lo) != 0)  # the residual is really kept
+        for k, m in enumerate(singles):
+            np.testing.assert_array_equal(batched.location[k], m.location)
+            np.testing.assert_array_equal(batched.location_lo[k], m.location_lo)
+
+
+def test_batched_mount_inside_transformations():
+    """Traced arguments skip the value checks but keep the shape rules and broadcasting."""
+
+    def build(betas):
+        m = lj.Mount([1.0, 2.0, 3.0], beta=betas, gamma=1.0)
+        return m.gamma + m.beta + m.location[:, 0]
+
+    np.testing.assert_array_equal(jax.jit(build)(jnp.array([1.0, 2.0])), [3.0, 4.0])
+    # vmap over single mounts built inside: one mount per call
+    shapes = []
+
+    def one(b):
+        m = lj.Mount([0.0, 0.0, 0.0], beta=b)
+        shapes.append(m.batch_shape)
+        return m.beta
+
+    np.testing.assert_array_equal(jax.vmap(one)(jnp.arange(3.0)), [0.0, 1.0, 2.0])
+    assert shapes == [()]
+    with pytest.raises(ValueError, match="batch sizes differ"):
+        jax.jit(lambda b: lj.Mount(jnp.zeros((3, 3)), beta=b).beta)(jnp.ones(2))

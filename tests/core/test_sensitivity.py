@@ -236,7 +236,7 @@ def test_inverse_budget_against_invert(site, inverse_budget):
     for k, scene in enumerate(scenes):
         # the record-noise term is invert's own Jacobian uncertainty with that noise
         sim = lj.simulate(scene, scan, mount, h, u_ref=U_SHARED)  # the table's compilation
-        inv = lj.invert(table, sim.los[None], noise=0.1, batch_size=None)
+        inv = lj.invert(table, sim.los[None], noise=0.1, batch_size="all")
         np.testing.assert_allclose(np.asarray(b.contribution["inv_speed"])[k, :, 3],
                                    np.asarray(inv.speed_std[0]), rtol=1e-6)
         np.testing.assert_allclose(np.asarray(b.contribution["inv_direction"])[k, :, 3],
@@ -251,7 +251,7 @@ def test_inverse_budget_against_invert(site, inverse_budget):
                 else:
                     g = sign * eps
                 los = lj.simulate(scene, scan, lj.Mount(loc, gamma=g), h, u_ref=U_SHARED).los
-                r = lj.invert(table, los[None], batch_size=None)
+                r = lj.invert(table, los[None], batch_size="all")
                 return np.asarray(r.speed[0]), np.asarray(r.direction[0])
             (s1, d1), (s0, d0) = run(1), run(-1)
             np.testing.assert_allclose(j["inv_speed"][k, :, i], (s1 - s0) / (2 * eps),
@@ -274,3 +274,39 @@ def test_inverse_budget_monte_carlo(inverse_budget):
     share = np.asarray(b.share["inv_direction"])
     assert share[..., 3].max() > 0.05 and share[..., 0].min() > 0.3
     assert jnp.all(jnp.isfinite(b.std["inv_speed"]))
+
+
+def test_batched_mount_sensitivity_equals_single_mounts():
+    """A batched Mount (three platform rotations from arrays) gives each rotation's own
+    Jacobian, as separate calls do."""
+    scene = lj.scenes.uniform(8.0, 300.0)
+    betas = np.array([0.0, 40.0, 130.0])
+    kw = dict(wrt=("beta", "pitch", "x"), outputs=("lidar_speed", "lidar_direction"))
+    batch = sensitivity(scene, lj.windcube_v1(), lj.Mount([1.0, 2.0, 3.0], beta=betas, pitch=1.0),
+                        HEIGHTS, **kw)
+    assert batch.jacobian["lidar_direction"].shape == (3, 3, 3)
+    for k, b in enumerate(betas):
+        one = sensitivity(scene, lj.windcube_v1(), lj.Mount([1.0, 2.0, 3.0], beta=b, pitch=1.0),
+                          HEIGHTS, **kw)
+        for o in kw["outputs"]:
+            np.testing.assert_allclose(np.asarray(batch.jacobian[o])[k], one.jacobian[o],
+                                       rtol=1e-12, atol=1e-14)
+    # uniform flow: the platform rotation turns the report degree for degree (as gamma does)
+    np.testing.assert_allclose(np.asarray(batch.jacobian["lidar_direction"])[..., 0], 1.0,
+                               rtol=1e-10)
+
+
+def test_monte_carlo_batch_default_and_validation():
+    """`mc_batch_size=None` picks the backend's chunk (256 here, on a CPU): the same draws, so
+    the same Monte Carlo, as an explicit chunk; bad chunks are refused before compiling."""
+    scene = lj.scenes.uniform(10.0, 200.0)
+    kw = dict(std={"epsilon": 1.0}, outputs=("lidar_direction",), n_monte_carlo=300, key=4)
+    mount = lj.Mount([0.0, 0.0, 0.0])
+    auto = uncertainty(scene, lj.windcube_v1(), mount, HEIGHTS[:1], **kw)
+    fixed = uncertainty(scene, lj.windcube_v1(), mount, HEIGHTS[:1], mc_batch_size=100, **kw)
+    np.testing.assert_allclose(auto.mc_std["lidar_direction"], fixed.mc_std["lidar_direction"],
+                               rtol=1e-12)
+    np.testing.assert_allclose(auto.mc_std["lidar_direction"], 1.0, rtol=0.15)
+    for bad in (0, 2.5, "all"):
+        with pytest.raises(ValueError, match="`mc_batch_size` must be a positive int or None"):
+            uncertainty(scene, lj.windcube_v1(), mount, HEIGHTS[:1], mc_batch_size=bad, **kw)
