@@ -7,21 +7,34 @@ input is concrete. Differences of two such coordinates are then accurate to floa
 of the *difference*, not of the absolute value (the classic double-float trick). With x64
 enabled and float64 inputs, ``lo`` is zero and nothing changes.
 
-**Safe under a fusing compiler.** The trick needs ``hi_a - hi_b`` to be exact and the
-residuals to be added to *that* difference. XLA on GPU contracts ``a * b + c`` into one FMA
-rounding, and a compiler allowed to reassociate (``--xla_cpu_enable_fast_math``, LLVM's
-``reassoc``) may evaluate ``(hi_a - hi_b) + (lo_a - lo_b)`` as ``(hi_a + lo_a) - (hi_b +
-lo_b)``, which rounds the residuals away (0.4 m at a northing of 6e6 m). So `difference`
-subtracts the high parts through **integers** (`exact_sub`): both are scaled by the same power
-of two (built from its bits) to exact integers below ``2**30``, subtracted as int32 and
-converted back; no floating-point addition or multiplication on the way can be fused or
-reordered with the residuals' sum, because a float -> int -> float conversion is not an
-arithmetic operation any compiler rewrites. Only the final ``hi + lo`` is a float sum, and
-every term in it is of the size of the difference, so any order of evaluation rounds at the
-difference's own resolution. The same holds for `split_bits` (an exact split into two
-half-precision parts by power-of-two quantisation, `lidarjax.scenes.turbulence` builds its
-exact ``U t`` products from it), which replaces Dekker's ``c * x`` splitting: that one
-depends on ``c * x`` being rounded before ``(c * x) - x`` and is broken by FMA contraction.
+**Safe under an optimising compiler.** The trick needs ``hi_a - hi_b`` to be exact and the
+residuals to be added to *that* difference, and a residual computed in-graph to be what it
+says. Compilers take liberties with all three, so nothing here relies on arithmetic being
+evaluated as written:
+
+- XLA on GPU replaces a chain of float conversions ``A -> B -> C`` by ``A -> C``
+  (``SimplifyFPConversions``, on with the default ``xla_allow_excess_precision``): the
+  residual ``x - float64(float32(x))`` of a float64 coordinate split in-graph came out 0 (a
+  float64 mount in a float32 field lost 0.25 m at a northing of 6e6 m; 1.4e-2 m/s in the
+  forward model). `split` rounds such values with `split_bits` in their own dtype instead
+  and converts each part once.
+- A compiler allowed to reassociate (``--xla_cpu_enable_fast_math``, LLVM's ``reassoc``) may
+  evaluate ``(hi_a - hi_b) + (lo_a - lo_b)`` as ``(hi_a + lo_a) - (hi_b + lo_b)``, which
+  rounds the residuals away. `difference` subtracts the high parts through **integers**
+  (`exact_sub`): both are scaled by the same power of two (built from its bits) to exact
+  integers below ``2**30``, subtracted as int32 and converted back; a float -> int -> float
+  conversion is not arithmetic any compiler rewrites, so the residuals cannot be folded into
+  the high parts. Only the final ``hi + lo`` is a float sum, and every term in it is of the
+  size of the difference, so any order of evaluation rounds at the difference's resolution.
+- XLA on GPU (and on CPU) contracts ``a * b + c`` into one FMA rounding. `split_bits` splits
+  a number exactly into two half-precision parts by power-of-two quantisation (``rint`` of
+  the number scaled by a power of two), so products of the parts are exact and an FMA
+  computes the same numbers; Dekker's splitting ``hi = c x - (c x - x)`` is no split at all
+  when contracted (`lidarjax.scenes.turbulence` builds its exact ``U t`` from `split_bits`).
+
+(Matrix products are the fourth liberty: on Ampere and later GPUs a float32 ``dot`` at
+DEFAULT precision runs in TensorFloat-32, 10-bit mantissas. Code that needs float32 there
+asks for ``Precision.HIGHEST``; see `lidarjax.forward`.)
 """
 
 from __future__ import annotations
@@ -31,6 +44,11 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+#: Matrix products of float32 in full float32 precision: a GPU's default (TensorFloat-32,
+#: 10-bit mantissas) would cost lidarjax's float32 results up to 3e-4 m/s. Passed as
+#: ``precision=HIGHEST`` to every ``einsum``/``dot``/``matmul`` of the model.
+HIGHEST = jax.lax.Precision.HIGHEST
 
 
 def is_concrete(*values) -> bool:

@@ -264,9 +264,10 @@ def _probe_mean_jvp(primals, tangents):
 def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
     # Matrix products here (rotation compositions, reconstructions) are tiny and must keep
     # the field's precision: on Ampere+ GPUs XLA runs a float32 `dot` at DEFAULT precision in
-    # TensorFloat-32 (10-bit mantissa), which turns the beam directions 5e-4 off and the LOS
-    # 1e-2 m/s off for a 10 m/s wind. Scoped to the trace of this function (every dot traced
-    # in it, also in `frames` and `scan`, gets HIGHEST precision); nothing global changes.
+    # TensorFloat-32 (10-bit mantissas), which turned the beams of a tilted, turned mount
+    # 5e-4 off (1e-2 m/s of LOS in a 10 m/s wind; tests/core/test_fused_arithmetic.py).
+    # Scoped to the trace of this function (every dot traced in it, also in `frames` and
+    # `scan`, gets HIGHEST precision); nothing global changes.
     with jax.default_matmul_precision("highest"):
         return _simulate_traced(field, scan, mount, heights, u_ref, probe, ratio_tol,
                                 point_reference=point_reference)

@@ -40,6 +40,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ._precision import HIGHEST
+
 __all__ = [
     "rotation_x",
     "rotation_y",
@@ -93,12 +95,13 @@ def tilt_rotation(
     """The installation's tilt, body -> level lidar frame: ``T = R_x(pitch) @ R_y(roll)``
     (degrees). Positive pitch raises the S0 (``+y``) side, positive roll lowers the S1
     (``+x``) side; ``pitch = -90`` points the instrument axis along the lidar's ``+y``."""
-    return rotation_x(pitch_deg) @ rotation_y(roll_deg)
+    return jnp.matmul(rotation_x(pitch_deg), rotation_y(roll_deg), precision=HIGHEST)
 
 
 def body_to_cfd_rotation(mount) -> Float[Array, "3 3"]:
     """Beam directions body -> CFD frame: ``R(beta + gamma - psi) @ T(pitch, roll)``."""
-    return lidar_to_cfd_rotation(mount) @ tilt_rotation(mount.pitch, mount.roll)
+    return jnp.matmul(lidar_to_cfd_rotation(mount), tilt_rotation(mount.pitch, mount.roll),
+                      precision=HIGHEST)
 
 
 def rotate(matrix: Float[Array, "3 3"], vectors: Float[Array, "... 3"]) -> Float[Array, "... 3"]:

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._precision import HIGHEST
 from .angles import direction_difference, horizontal_speed, wrap180
 from .inverse import invert_reconstructed
 from .response import ResponseTable
@@ -170,9 +171,10 @@ def sector_rose(rose: CorrectionRose, n_sectors: int = 12) -> CorrectionRose:
             f"({360.0 / d.size:g} degrees)."
         )
     wts = jnp.asarray(weights / weights.sum(axis=1, keepdims=True), rose.speed_ratio.dtype)
-    ratio = wts @ rose.speed_ratio
+    ratio = jnp.matmul(wts, rose.speed_ratio, precision=HIGHEST)
     a = jnp.deg2rad(rose.direction_addend)
-    addend = jnp.rad2deg(jnp.arctan2(wts @ jnp.sin(a), wts @ jnp.cos(a)))
+    addend = jnp.rad2deg(jnp.arctan2(jnp.matmul(wts, jnp.sin(a), precision=HIGHEST),
+                                     jnp.matmul(wts, jnp.cos(a), precision=HIGHEST)))
     return CorrectionRose(
         jnp.asarray(centres, rose.directions.dtype), ratio, wrap180(addend), rose.reference,
         rose.target, True,

@@ -54,7 +54,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import default_float, is_concrete
+from ._precision import HIGHEST, default_float, is_concrete
 from .frames import beam_directions
 
 __all__ = ["Scan", "windcube_v1", "windcube_v2", "zephir", "reconstruct", "METHODS",
@@ -341,7 +341,7 @@ def reconstruct(scan: Scan, los: Float[Array, "... b"]) -> Float[Array, "... 3"]
         return jnp.stack([u, v, w], axis=-1)
     # sine_fit and least_squares: the same linear least squares on the beam matrix.
     pinv = jnp.linalg.pinv(scan.directions().astype(los.dtype))  # (3, b)
-    return jnp.einsum("kb,...b->...k", pinv, los)
+    return jnp.einsum("kb,...b->...k", pinv, los, precision=HIGHEST)
 
 
 # ------------------------------------------------------------------------------------------

@@ -44,6 +44,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._deprecated import deprecated_getattr
+from ._precision import HIGHEST
 from .angles import direction_difference, horizontal_speed, wind_direction
 from .corrections import DEFAULT_RATIO_TOL, safe_ratio
 from .response import ResponseTable
@@ -216,15 +217,15 @@ def _scalar(table, speed, direction, w, alpha, offset, cone, threshold, ratio_to
     rad = jnp.deg2rad(jnp.where(speed == 0, 0.0, direction))
     sta = jnp.stack([-speed * jnp.sin(rad), -speed * jnp.cos(rad)], axis=-1)  # (..., h, 2)
     axes = _pair_axes(offset, speed.dtype)  # (2 pairs, 2)
-    c_sta = jnp.einsum("...hk,pk->...hp", sta, axes)
+    c_sta = jnp.einsum("...hk,pk->...hp", sta, axes, precision=HIGHEST)
     centre = table.point_spline.per_row(alpha)  # (..., h, 3)
     beams = table.beam_velocity_spline.per_row(alpha)  # (..., h, b, 3)
     scale_c = jnp.linalg.norm(centre, axis=-1)[..., None]  # (..., h, 1)
-    c_centre = jnp.einsum("...hk,pk->...hp", centre[..., :2], axes)  # (..., h, 2)
+    c_centre = jnp.einsum("...hk,pk->...hp", centre[..., :2], axes, precision=HIGHEST)  # (..., h, 2)
     plus = beams[..., :2, :]  # beams 0 and 1: the + beam of each pair
     minus = beams[..., 2:4, :]
-    c_plus = jnp.einsum("...hpk,pk->...hp", plus[..., :2], axes)
-    c_minus = jnp.einsum("...hpk,pk->...hp", minus[..., :2], axes)
+    c_plus = jnp.einsum("...hpk,pk->...hp", plus[..., :2], axes, precision=HIGHEST)
+    c_minus = jnp.einsum("...hpk,pk->...hp", minus[..., :2], axes, precision=HIGHEST)
     a_plus = safe_ratio(c_plus, c_centre, scale_c, ratio_tol)
     a_minus = safe_ratio(c_minus, c_centre, scale_c, ratio_tol)
     w_centre = centre[..., 2:3]
@@ -235,7 +236,7 @@ def _scalar(table, speed, direction, w, alpha, offset, cone, threshold, ratio_to
     homog = jnp.abs(c_sta) < threshold
     a_sum = jnp.where(homog, 2.0, a_plus + a_minus)
     c_m = (2.0 * c_sta - vertical) / a_sum
-    return _wind(jnp.einsum("...hp,pk->...hk", c_m, axes))
+    return _wind(jnp.einsum("...hp,pk->...hk", c_m, axes, precision=HIGHEST))
 
 
 def vector_correction(
@@ -281,7 +282,7 @@ def vector_correction(
 @eqx.filter_jit
 def _vector(table, los, alpha, offset, cone, ratio_tol):
     centre = table.point_spline.per_row(alpha)  # (..., h, 3)
-    num = jnp.einsum("...hk,bk->...hb", centre, table.beam_vectors[:4])  # (..., h, 4)
+    num = jnp.einsum("...hk,bk->...hb", centre, table.beam_vectors[:4], precision=HIGHEST)  # (..., h, 4)
     den = table.response_spline.per_row(alpha)[..., :4]
     scale = jnp.linalg.norm(centre, axis=-1)
     su = safe_ratio(num, den, scale[..., None], ratio_tol)

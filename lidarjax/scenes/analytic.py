@@ -19,7 +19,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._precision import default_float, split
+from .._precision import HIGHEST, default_float, split
 from ..angles import heading
 from ..field import AbstractField
 
@@ -115,7 +115,8 @@ class Linear(AbstractField):
     gradient: Float[Array, "3 3"]
 
     def sample_local(self, points):
-        return self.velocity + jnp.einsum("ij,...j->...i", self.gradient, points)
+        return self.velocity + jnp.einsum("ij,...j->...i", self.gradient, points,
+                                           precision=HIGHEST)
 
 
 def linear(
@@ -203,7 +204,7 @@ class Hill(AbstractField):
         nvec = jnp.stack([jnp.sin(a), jnp.cos(a), jnp.zeros_like(a)])
         e = heading(self.direction, self.dtype)
         free = self.speed * e
-        un = jnp.dot(free, nvec)
+        un = jnp.dot(free, nvec, precision=HIGHEST)
         n = jnp.sum(points * nvec, axis=-1)
         big_h, big_l = self.height, self.half_width
         ground = big_h / (1.0 + (n / big_l) ** 2)

@@ -37,15 +37,19 @@ partial products ``U_hi t_hi``, ``U_hi t_lo``, ``U_lo t_hi`` and ``U_lo t_lo`` a
 float32 numbers; the three large ones are reduced by ``lax.rem`` (exact in IEEE arithmetic)
 and the pieces, each smaller than ``Lx``, summed. The position in the box thus keeps the
 resolution of a float32 coordinate *inside the box* (a few ``ulp(Lx)``, 0.5 mm each for an
-8 km box) whatever ``t``, rather than ``ulp(U t)``. This holds under a fusing compiler too:
-XLA on GPU contracts ``a * b + c`` into FMAs, and ``--xla_cpu_enable_fast_math`` also
-reassociates sums; every product here is exact, so an FMA computes the same number, and the
-only sums left are of box-sized terms, whose order does not matter at that resolution. (The
-former formulation, Dekker's two-product, needs every product rounded on its own: an FMA in
-its ``c * x`` splitting silently drops the error term.) Time itself is read in the working
+8 km box) whatever ``t``, rather than ``ulp(U t)``. This holds whatever the compiler does
+with the arithmetic: XLA contracts ``a * b + c`` into FMAs (on GPU and CPU), and
+``--xla_cpu_enable_fast_math`` also reassociates sums; every product here is exact, so an
+FMA computes the same number, the split uses ``rint`` rather than arithmetic a compiler
+could rewrite, and the only sums left are of box-sized terms, whose order does not matter
+at that resolution. (The former formulation, Dekker's two-product, relied on its splitting
+``c x - (c x - x)`` being evaluated as written: reassociated it folds to ``x``, and fast
+math put the box 1.4 cm off after a day.) Time itself is read in the working
 dtype: a float32 ``t`` of 3600 s resolves 0.24 ms (2.4 mm at 10 m/s); for absolute times of
 days or more, advance the field to the record start first with `FrozenTurbulence.advanced`
-(reduced in float64 on the host) and pass times within the record.
+(reduced in float64 on the host) and pass times within the record. The time sampler's lines
+are projected by matrix products at ``Precision.HIGHEST``: at DEFAULT, a GPU runs float32 ones
+in TensorFloat-32 (10-bit mantissas, 3e-4 of the amplitude off).
 
 **Reading other codes' boxes.** HAWC2 and OpenFAST's InflowWind sweep a Mann box through the
 turbine in *increasing* box ``x`` (Wise and Bachynski 2020, appendix), i.e. they see the mirror
