@@ -87,6 +87,7 @@ from .progress import ProgressTask as ProgressTask
 from .progress import TextProgress as TextProgress
 from .progress import TqdmProgress as TqdmProgress
 from .progress import progress_meter as progress_meter
+from .response import Instrument as Instrument
 from .response import PeriodicSpline as PeriodicSpline
 from .response import ResponseTable as ResponseTable
 from .roses import CorrectionRose as CorrectionRose

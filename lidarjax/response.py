@@ -25,7 +25,10 @@ interval, evaluate a cubic), differentiable in the direction and in the tabulate
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -39,8 +42,108 @@ from .angles import horizontal_speed, wind_direction
 from .forward import Simulation
 from .frames import cfd_to_north_rotation
 from .mount import Mount
+from .probe import AbstractProbe, CWProbe, PointProbe, PulsedProbe
+from .scan import Scan
 
-__all__ = ["PeriodicSpline", "ResponseTable"]
+__all__ = ["PeriodicSpline", "ResponseTable", "Instrument"]
+
+
+def scan_name(scan: Scan) -> str:
+    """The preset a `Scan` follows: ``windcube_v1``, ``windcube_v2``, ``zephir`` (sine fit),
+    ``nacelle_2beam``, ``nacelle_4beam``, or ``custom`` (least squares)."""
+    return {"sine_fit": "zephir", "least_squares": "custom"}.get(scan.method, scan.method)
+
+
+def _host_number(x) -> float | None:
+    if x is None or not is_concrete(x):
+        return None
+    v = float(np.asarray(x, np.float64))
+    return v if math.isfinite(v) else None
+
+
+@dataclasses.dataclass(frozen=True)
+class Instrument:
+    """What a table's CFD runs simulated, so that records from another instrument or
+    installation are refused (`lidarjax.check_instrument`): host numbers, degrees and metres.
+
+    - `scan`: the preset (`scan_name`: ``windcube_v2``, ``zephir``, ..., ``custom``);
+      `cone_angle_deg`: the scan's cone (half) angle from the vertical; `n_beams`; whether the
+      scan has a `vertical_beam`; `tilt_compensation`.
+    - `heights_m`: the measurement heights above the lidar.
+    - `epsilon_deg`, `pitch_deg`, `roll_deg`: the installation (north offset, tilt) shared by
+      every run, or None when the runs' mounts differ or were not given.
+    - `probe`: the probe volume (``point``, ``pulsed``, ``cw``) or None.
+
+    Static metadata of a `ResponseTable` (never differentiated); `metadata()` gives the keys
+    that `lidarjax.io.save_table` writes and `lidarjax correct` checks.
+    """
+
+    scan: str
+    cone_angle_deg: float | None
+    n_beams: int
+    vertical_beam: bool = False
+    tilt_compensation: bool = False
+    heights_m: tuple[float, ...] | None = None
+    epsilon_deg: float | None = None
+    pitch_deg: float | None = None
+    roll_deg: float | None = None
+    probe: str | None = None
+
+    @classmethod
+    def of(cls, scan: Scan, mount: Mount | Sequence[Mount] | None = None, heights=None,
+           probe: AbstractProbe | None = None) -> Instrument:
+        """The instrument of `scan` mounted as `mount` (or a sequence of mounts: their
+        shared epsilon, pitch and roll) at `heights` (m), with `probe`."""
+        mounts = [] if mount is None else ([mount] if isinstance(mount, Mount) else list(mount))
+
+        def shared(name):
+            vals = [_host_number(getattr(m, name)) for m in mounts]
+            if not vals or any(v is None for v in vals):
+                return None
+            return vals[0] if np.allclose(vals, vals[0], atol=1e-9) else None
+
+        hh = None
+        if heights is not None and is_concrete(heights):
+            hh = tuple(float(v) for v in np.asarray(heights, np.float64).reshape(-1))
+        kind = {PointProbe: "point", PulsedProbe: "pulsed", CWProbe: "cw"}.get(type(probe))
+        return cls(scan=scan_name(scan), cone_angle_deg=_host_number(scan.cone_angle),
+                   n_beams=int(scan.n_beams), vertical_beam=bool(scan.vertical),
+                   tilt_compensation=bool(scan.tilt_compensation), heights_m=hh,
+                   epsilon_deg=shared("epsilon"), pitch_deg=shared("pitch"),
+                   roll_deg=shared("roll"), probe=kind)
+
+    def metadata(self) -> dict[str, Any]:
+        """The facts as table-file metadata (None omitted)."""
+        out: dict[str, Any] = {"scan": self.scan, "n_beams": self.n_beams,
+                               "vertical_beam": self.vertical_beam,
+                               "tilt_compensation": self.tilt_compensation}
+        for key in ("cone_angle_deg", "epsilon_deg", "pitch_deg", "roll_deg", "probe"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        if self.heights_m is not None:
+            out["heights_m"] = list(self.heights_m)
+        return out
+
+    @classmethod
+    def from_metadata(cls, meta: Mapping[str, Any]) -> Instrument | None:
+        """The instrument a table file's metadata states, or None without ``scan`` and
+        ``n_beams``."""
+        if not isinstance(meta.get("scan"), str) or not isinstance(meta.get("n_beams"), int):
+            return None
+
+        def num(key):
+            v = meta.get(key)
+            return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None
+
+        hh = meta.get("heights_m")
+        probe = meta.get("probe")
+        return cls(scan=meta["scan"], cone_angle_deg=num("cone_angle_deg"),
+                   n_beams=meta["n_beams"], vertical_beam=bool(meta.get("vertical_beam", False)),
+                   tilt_compensation=bool(meta.get("tilt_compensation", False)),
+                   heights_m=tuple(float(v) for v in hh) if isinstance(hh, list) else None,
+                   epsilon_deg=num("epsilon_deg"), pitch_deg=num("pitch_deg"),
+                   roll_deg=num("roll_deg"),
+                   probe=probe if probe in ("point", "pulsed", "cw") else None)
 
 #: Two tabulated directions closer than this (degrees, modulo 360) count as duplicates.
 DUPLICATE_TOL = 1e-9
@@ -191,6 +294,9 @@ class ResponseTable(eqx.Module):
       north frame (ZephyCube's scalar correction).
     - `beam_vectors`: optional ``(b, 3)`` beam unit vectors, north frame.
     - `heights`: optional ``(h,)`` measurement heights above the lidar, m.
+    - `instrument`: optional `Instrument`, the scan and installation the runs simulated
+      (static metadata; `from_simulations` and `lidarjax.build_table` fill it, and
+      `lidarjax.io.save_table` writes it), so records from another instrument are refused.
 
     The table is stored sorted by direction in ``[0, 360)``; the dtype follows `response`
     (float32 stays float32, anything else becomes the default float). Build tables outside
@@ -209,6 +315,7 @@ class ResponseTable(eqx.Module):
     beam_velocity: Float[Array, "s h b 3"] | None
     beam_vectors: Float[Array, "b 3"] | None
     heights: Float[Array, " h"] | None
+    instrument: Instrument | None = eqx.field(static=True)
     response_spline: PeriodicSpline
     reconstructed_spline: PeriodicSpline | None
     point_spline: PeriodicSpline | None
@@ -224,8 +331,13 @@ class ResponseTable(eqx.Module):
         beam_velocity: Float[ArrayLike, "s h b 3"] | None = None,
         beam_vectors: Float[ArrayLike, "b 3"] | None = None,
         heights: Float[ArrayLike, " h"] | None = None,
+        instrument: Instrument | None = None,
     ):
         dtype = _dtype_of(response)
+        if instrument is not None and not isinstance(instrument, Instrument):
+            raise ValueError("ResponseTable: `instrument` must be a lidarjax.Instrument "
+                             "(Instrument.of(scan, mount, heights, probe)) or None.")
+        self.instrument = instrument
         d = _host_float(directions, "directions")
         r = _host_float(response, "response")
         if d.ndim != 1 or d.size < 3:
@@ -372,6 +484,9 @@ class ResponseTable(eqx.Module):
         *,
         mount: Mount | Sequence[Mount] | None = None,
         fields: Sequence | None = None,
+        scan: Scan | None = None,
+        probe: AbstractProbe | None = None,
+        instrument: Instrument | None = None,
     ) -> ResponseTable:
         """A table from `lidarjax.simulate` results, one per CFD run (inflow direction).
 
@@ -385,6 +500,9 @@ class ResponseTable(eqx.Module):
           centre-line projections of ZephyCube's vector correction) and for `fields`.
         - `fields`: optional sequence of the runs' fields (one per run); the velocity at the
           beam points is sampled from them for ZephyCube's scalar correction.
+        - `scan`, `probe`: the scan and probe the runs used: with them the table knows its
+          `Instrument` (cone angle, beams, heights, and the mounts' epsilon and tilt), or give
+          `instrument` directly.
 
         Each run gives direction ``wind_direction(free_velocity)`` and, divided by
         ``horizontal_speed(free_velocity)``: `response` from ``los``, `reconstructed` from
@@ -483,4 +601,6 @@ class ResponseTable(eqx.Module):
             beam_velocity=cast(beam_velocity),
             beam_vectors=cast(beam_vectors),
             heights=cast(heights[0]),
+            instrument=instrument if instrument is not None or scan is None
+            else Instrument.of(scan, mount, heights[0], probe),
         )

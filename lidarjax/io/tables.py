@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .._util import PathLike, atomic_path, file_error, require_file
-from ..response import ResponseTable
+from ..response import Instrument, ResponseTable
 
 __all__ = ["save_table", "load_table", "TABLE_FORMAT"]
 
@@ -35,7 +35,8 @@ def save_table(path: PathLike, table, metadata: dict[str, Any] | None = None) ->
         value = getattr(table, name)
         if value is not None:
             arrays[name] = np.asarray(value)
-    meta = {"format": TABLE_FORMAT, **(metadata or {})}
+    own = {} if table.instrument is None else table.instrument.metadata()
+    meta = {"format": TABLE_FORMAT, **own, **(metadata or {})}
     arrays["metadata"] = np.asarray(json.dumps(meta, default=float))
     target = Path(path)
     with atomic_path(target) as tmp, open(tmp, "xb") as fh:
@@ -81,7 +82,8 @@ def load_table(path: PathLike, *, return_metadata: bool = False):
             raise file_error(p, None, f"array {name!r} has dtype {a.dtype}; a table holds real "
                              "float32/float64 numbers (build it again with lidarjax table)")
     try:
-        table = ResponseTable(arrays.pop("directions"), arrays.pop("response"), **arrays)
+        table = ResponseTable(arrays.pop("directions"), arrays.pop("response"), **arrays,
+                              instrument=Instrument.from_metadata(meta))
     except ValueError as err:
         raise file_error(p, None, f"inconsistent table ({err})") from None
     return (table, meta) if return_metadata else table

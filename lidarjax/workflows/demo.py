@@ -199,7 +199,8 @@ def run_demo(out: Path, *, plots: bool = True, log=print) -> dict:
         f"seed files in {out / 'seed'}")
 
     v2 = list(sims["windcube_v2"].values())
-    table = ResponseTable.from_simulations(v2, mount=[mount_for(b) for b in BETAS])
+    table = ResponseTable.from_simulations(v2, mount=[mount_for(b) for b in BETAS],
+                                           scan=windcube_v2(), probe=PulsedProbe())
     save_table(out / "table.npz", table, {"scan": "windcube_v2", "probe": "PulsedProbe()",
                                           "scene": "hemisphere R=20 m, demo"})
 

@@ -431,7 +431,8 @@ def farm_study(
     beams = np.stack([np.broadcast_to(lidar_local[:2], pts_abs[-1, :, :2].shape),
                       pts_abs[-1, :, :2] - origin[:2]], 1)
     points = farm_monitor_points(f_map, scan, m_map, heights, probe, names=names)
-    table = ResponseTable.from_simulations(sims, mount=None) if dirs.size >= 3 else None
+    table = (ResponseTable.from_simulations(sims, mount=None, scan=scan, probe=probe)
+             if dirs.size >= 3 else None)
     return FarmStudy(
         names=tuple(names), directions=dirs, heights=np.asarray(heights, np.float64),
         lidar_speed=lspeed, lidar_direction=ldir, speed_ratio=ratio, direction_addend=addend,

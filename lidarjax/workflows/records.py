@@ -136,7 +136,10 @@ def check_instrument(metadata: dict, table, records: RecordSet, *,
                      angle_tolerance: float = 1.0) -> list[str]:
     """Mismatches between a table's metadata and a record file's header, one text each
     ("scan angle: table 28 deg, record header ScanAngle=15 deg"). Facts either side does not
-    state are skipped (see `table_warnings` for tables without metadata)."""
+    state are skipped (see `table_warnings` for tables without metadata). The table's own
+    `lidarjax.Instrument` fills what `metadata` does not say."""
+    if table is not None and getattr(table, "instrument", None) is not None:
+        metadata = {**table.instrument.metadata(), **metadata}
     out = []
     scan = str(metadata.get("scan", "") or "")
     inst = records.instrument
@@ -238,7 +241,10 @@ def subset_table(table, index):
         reconstructed=take(table.reconstructed), point=take(table.point),
         beam_velocity=take(table.beam_velocity),
         beam_vectors=None if table.beam_vectors is None else np.asarray(table.beam_vectors),
-        heights=take(table.heights, axis=0))
+        heights=take(table.heights, axis=0),
+        instrument=None if table.instrument is None else dataclasses.replace(
+            table.instrument, heights_m=None if table.instrument.heights_m is None
+            else tuple(table.instrument.heights_m[i] for i in idx)))
 
 
 # ------------------------------------------------------------------------------------------

@@ -218,7 +218,8 @@ def build_table(
                 "client.run(jax.config.update, 'jax_enable_x64', True)")
     meter.close(bar)
     sims = {b: sims[b] for b in betas}
-    table = ResponseTable.from_simulations(list(sims.values()), mount=mounts)
+    table = ResponseTable.from_simulations(list(sims.values()), mount=mounts, scan=scan,
+                                           probe=probe)
     return table, sims
 
 

@@ -212,3 +212,27 @@ def test_load_records_is_read_then_to_record_set(tmp_path, name, text, kw):
     else:
         want = read_sta(path).to_record_set()
     same(got, want)
+
+
+def test_a_table_that_knows_its_instrument_refuses_another(tmp_path):
+    """A V1 record file (ScanAngle 30, DirectionOffset 12.5) against tables whose own
+    `lidarjax.Instrument` says otherwise: every mismatch is named, with no file metadata."""
+    import lidarjax as lj
+    from lidarjax.response import Instrument
+    from lidarjax.workflows.records import check_instrument, load_records
+
+    path = tmp_path / "v1.sta"
+    path.write_text(S.sta_v1_text())
+    rec = load_records(path)
+    d = np.array([0.0, 120.0, 240.0])
+    resp = np.ones((3, len(rec.heights), 4))
+    same = lj.ResponseTable(d, resp, instrument=Instrument(
+        scan="windcube_v1", cone_angle_deg=30.0, n_beams=4, epsilon_deg=12.5))
+    assert check_instrument({}, same, rec) == []
+    other = lj.ResponseTable(d, resp, instrument=Instrument(
+        scan="windcube_v1", cone_angle_deg=15.0, n_beams=4, epsilon_deg=40.0))
+    bad = check_instrument({}, other, rec)
+    assert any("cone angle: table 15 deg, record header ScanAngle=30 deg" in b for b in bad)
+    assert any("direction offset" in b for b in bad)
+    # explicit file metadata still wins over the table's own facts
+    assert not any("cone angle" in b for b in check_instrument({"cone_angle_deg": 30.0}, other, rec))

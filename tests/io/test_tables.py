@@ -33,3 +33,26 @@ def test_not_a_table_is_one_line_naming_the_file(tmp_path):
         load_table(bad)
     with pytest.raises(FileNotFoundError, match="response table not found"):
         load_table(tmp_path / "missing.npz")
+
+
+def test_the_instrument_travels_with_the_table(tmp_path):
+    """A table built through the Python API knows its scan and installation; the file keeps
+    it; explicit metadata wins over it."""
+    scene = lj.scenes.uniform(10.0, 0.0)
+    scan = lj.windcube_v2(15.0)
+    mount = lj.Mount([0.0, 0.0, 0.0], epsilon=12.0, pitch=0.4)
+    sims = [lj.simulate(lj.scenes.uniform(10.0, d), scan, mount, [40.0, 80.0],
+                        u_ref=10.0 * lj.heading(d)) for d in (0.0, 120.0, 240.0)]
+    del scene
+    t = lj.ResponseTable.from_simulations(sims, mount=mount, scan=scan, probe=lj.PulsedProbe())
+    inst = t.instrument
+    assert (inst.scan, inst.cone_angle_deg, inst.n_beams, inst.vertical_beam) == \
+        ("windcube_v2", 15.0, 5, True)
+    assert inst.heights_m == (40.0, 80.0) and inst.epsilon_deg == 12.0
+    assert inst.pitch_deg == pytest.approx(0.4) and inst.probe == "pulsed"
+    path = save_table(tmp_path / "t.npz", t, metadata={"site": "x", "probe": "PulsedProbe()"})
+    back, meta = load_table(path, return_metadata=True)
+    assert meta["cone_angle_deg"] == 15.0 and meta["epsilon_deg"] == 12.0
+    assert meta["probe"] == "PulsedProbe()" and meta["site"] == "x"
+    assert back.instrument.cone_angle_deg == 15.0 and back.instrument.heights_m == (40.0, 80.0)
+    assert lj.ResponseTable.from_simulations(sims, mount=mount).instrument is None
