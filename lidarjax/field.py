@@ -243,6 +243,17 @@ class GridField(AbstractField):
 
     def __init__(self, x, y, z, velocity, *, uniform=None):
         host = velocity if isinstance(velocity, np.ndarray) else None
+        kind = getattr(velocity, "dtype", None)
+        if kind is None:
+            kind = np.asarray(velocity).dtype
+        if np.issubdtype(kind, np.complexfloating):
+            raise ValueError(f"GridField: `velocity` is complex ({kind}); a velocity field is "
+                             "real m/s (take .real if the imaginary part is zero).")
+        if kind in (np.float16, jnp.bfloat16):
+            raise ValueError(f"GridField: `velocity` is {kind}; lidarjax computes in float32 or "
+                             "float64 (cast with .astype(np.float32)).")
+        if not (np.issubdtype(kind, np.number) or kind == np.bool_):
+            raise ValueError(f"GridField: `velocity` must be numbers (m/s), got dtype {kind}.")
         velocity = jnp.asarray(velocity)
         if not jnp.issubdtype(velocity.dtype, jnp.floating):
             velocity = velocity.astype(default_float())

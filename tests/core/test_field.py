@@ -115,3 +115,12 @@ def test_float32_at_utm_coordinates():
     assert sim.los.dtype == jnp.float32
     exact = lj.simulate(scene, lj.windcube_v1(), lj.Mount([101.234567, 99.876543, 5.0]), [40.0])
     np.testing.assert_allclose(sim.los, exact.los, atol=2e-5)
+
+
+@pytest.mark.parametrize("dtype, message", [
+    (np.complex128, "complex"), (np.float16, "float16"), (np.dtype("U3"), "must be numbers")])
+def test_velocity_dtypes_a_field_cannot_hold_are_refused_in_one_line(dtype, message):
+    x = np.linspace(0.0, 10.0, 4)
+    vel = np.zeros((4, 4, 4, 3), dtype=dtype)
+    with pytest.raises(ValueError, match=rf"GridField: `velocity` .*{message}"):
+        lj.GridField(x, x, x, vel)
