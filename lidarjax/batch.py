@@ -111,8 +111,8 @@ def stack_mounts(mounts: Mount | Sequence[Mount]) -> Mount:
 
     `mounts`: a list of single mounts, of batched mounts (their batches are concatenated) or
     of both; a batched `Mount` is returned as it is, a single one as a batch of one. Each
-    field is stacked once on the host (linear in the number of mounts: 10,000 single mounts
-    in well under a second), or with `jax.numpy` when a leaf is traced. Dtypes promote as
+    field is stacked once on the host (linear in the number of mounts: about 0.5 s for 10,000
+    single mounts on a 2-core CPU), or with `jax.numpy` when a leaf is traced. Dtypes promote as
     `jax.numpy.stack` would (float32 with float64 gives float64). Building the batch from
     arrays, ``Mount(locations, beta=betas, ...)``, is faster still.
 
@@ -131,21 +131,44 @@ def stack_mounts(mounts: Mount | Sequence[Mount]) -> Mount:
     names = [f.name for f in dataclasses.fields(Mount)]
     fields = [vars(m) for m in mounts]  # plain attribute reads: linear and fast
     single = all(f["location"].ndim == 1 for f in fields)
+    traced = any(isinstance(x, jax.core.Tracer) for f in fields for x in f.values())
     out = []
     for name in names:
         column = [f[name] for f in fields]
         core = (3,) if name.startswith("location") else ()
-        dtype = jnp.result_type(*{x.dtype for x in column})
-        try:
-            host = [np.asarray(x) for x in column]
-        except jax.errors.TracerArrayConversionError:  # inside a transformation
+        dtypes = {x.dtype for x in column}
+        dtype = jnp.result_type(*dtypes)
+        if traced:  # inside a transformation
             out.append(jnp.concatenate([jnp.reshape(x, (-1,) + core).astype(dtype)
                                         for x in column]))
-            continue
-        stacked = np.stack(host) if single else np.concatenate(
-            [x.reshape((-1,) + core) for x in host])
-        out.append(jnp.asarray(stacked.astype(dtype, copy=False)))
+        elif single and len(dtypes) == 1 and len(column) >= _DEVICE_STACK_MIN:
+            out.append(_stack_on_device(column))
+        else:
+            host = [np.asarray(x).reshape((-1,) + core) for x in column]
+            out.append(jnp.asarray(np.concatenate(host).astype(dtype, copy=False)))
     return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(mounts[0]), out)
+
+
+#: Many single mounts are stacked on the device in compiled groups of this many leaves (one
+#: compilation per leaf shape and dtype, about 2 microseconds a leaf), not copied to the host
+#: one by one (about 5 microseconds a leaf, 10 under load).
+_DEVICE_STACK_GROUP = 256
+_DEVICE_STACK_MIN = 1024
+_stack_group = jax.jit(lambda *xs: jnp.stack(xs))
+
+
+def _stack_on_device(column):
+    """``jnp.stack(column)`` for many equal-shaped concrete arrays, linear in their number:
+    groups of `_DEVICE_STACK_GROUP` (the last padded with its last leaf) stacked by one
+    compiled function, the groups joined on the host. Falls back to the host when the
+    leaves live on different devices."""
+    n, k = len(column), _DEVICE_STACK_GROUP
+    padded = column + [column[-1]] * ((-n) % k)
+    try:
+        groups = [np.asarray(_stack_group(*padded[i:i + k])) for i in range(0, len(padded), k)]
+    except ValueError:  # e.g. leaves committed to different devices
+        groups = [np.stack([np.asarray(x) for x in column])]
+    return jnp.asarray(np.concatenate(groups)[:n])
 
 
 def unstack_mounts(mount: Mount | Sequence[Mount]) -> list[Mount]:

@@ -119,6 +119,9 @@ def _validate(field, scan, mount, heights, u_ref, probe) -> None:
         )
     if not isinstance(mount, Mount):
         raise ValueError(f"simulate: `mount` must be a lidarjax.Mount, got {type(mount).__name__}.")
+    if mount.batch_shape:
+        raise ValueError(f"simulate: `mount` holds {mount.n_mounts} mounts (a batch); simulate "
+                         "takes one: use lidarjax.simulate_rotations for a batch, or jax.vmap.")
     if not isinstance(probe, AbstractProbe):
         raise ValueError(f"simulate: `probe` must be a probe, got {type(probe).__name__}.")
     if is_concrete(heights):

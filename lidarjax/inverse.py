@@ -38,6 +38,8 @@ Directions are meteorological (from, degrees clockwise from north) in ``[0, 360)
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -47,7 +49,7 @@ import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._backend import CPU_BATCH, bucket, default_batch, positive_size
-from ._precision import default_float, is_concrete
+from ._precision import HIGHEST, default_float, is_concrete
 from .flags import InverseFlag
 from .response import PeriodicSpline, ResponseTable, locate
 
@@ -255,8 +257,8 @@ def _solve_batch(los, w, noise, values, knots, geom, coefficients, cfg):
     scale = jax.lax.stop_gradient(jnp.where(scale > 0, scale, 1.0))
     los = los / scale[..., None]
     # Start: best tabulated direction with its closed-form nonnegative speed.
-    a = jnp.einsum("rhb,shb->rhs", w * los, values)
-    c = jnp.einsum("rhb,shb->rhs", w, values * values)
+    a = jnp.einsum("rhb,shb->rhs", w * los, values, precision=HIGHEST)
+    c = jnp.einsum("rhb,shb->rhs", w, values * values, precision=HIGHEST)
     uk = jnp.where((a > 0) & (c > 0), a / jnp.where(c > 0, c, 1.0), 0.0)
     k = jnp.argmax(a * uk, axis=-1)
     u0 = jnp.take_along_axis(uk, k[..., None], axis=-1)[..., 0]
@@ -272,9 +274,11 @@ def _solve_batch(los, w, noise, values, knots, geom, coefficients, cfg):
 
 
 @eqx.filter_jit
-def _invert_core(spline, values, knots, valid, los, weights, noise, cfg, per_batch):
+def _invert_core(spline, values, knots, valid, los, weights, noise, cfg, per_batch, n_real):
     """Records ``los`` ``(n, h, b)`` (weights alike, noise ``(n, h)``), solved in batches of
-    `per_batch` records (None: all at once), returned as an `Inversion` of ``(n, h)``."""
+    `per_batch` records (None: all at once), returned as an `Inversion` of ``(n, h)``. Only
+    the first `n_real` records (a traced count: no recompilation) are real; batches holding
+    none of them (bucket padding) are skipped."""
     n, h, b = los.shape
     w_r = weights * valid
     values = jnp.where(valid, values, 0.0)
@@ -293,7 +297,15 @@ def _invert_core(spline, values, knots, valid, los, weights, noise, cfg, per_bat
             jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)]),
         )
         xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
-        out = jax.lax.map(run, xs)
+        shapes = jax.eval_shape(run, jax.tree_util.tree_map(lambda x: x[0], xs))
+        skipped = lambda x: jax.tree_util.tree_map(  # noqa: E731
+            lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+
+        def one_batch(args):
+            k, x = args
+            return jax.lax.cond(k * per_batch < n_real, run, skipped, x)
+
+        out = jax.lax.map(one_batch, (jnp.arange(xs[0].shape[0]), xs))
         out = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:])[:n], out)
     return Inversion(**out)
 
@@ -378,17 +390,33 @@ def _run(spline, values, knots, valid, los, weights, noise, *, min_beams, max_st
     n = int(np.prod(batch, dtype=np.int64))
     per_batch, n_pad = _batching(batch_size, n, h, b, values.shape[0], np.dtype(dtype).itemsize,
                                  fname)
-    los, weights, noise = los.reshape(n, h, b), weights.reshape(n, h, b), noise.reshape(n, h)
     if not is_concrete(los, weights, noise):
         n_pad = n  # inside a transformation the caller's compilation fixes the shapes anyway
-    if n_pad > n:  # dummy records (no usable beam: solved trivially), dropped below
-        los = jnp.concatenate([los, jnp.zeros((n_pad - n, h, b), dtype)])
-        weights = jnp.concatenate([weights, jnp.zeros((n_pad - n, h, b), dtype)])
-        noise = jnp.concatenate([noise, jnp.full((n_pad - n, h), jnp.nan, dtype)])
-    out = _invert_core(spline, values, knots, valid, los, weights, noise, cfg, per_batch)
-    if n_pad > n:
-        out = jax.tree_util.tree_map(lambda x: x[:n], out)
-    return jax.tree_util.tree_map(lambda x: x.reshape(tuple(batch) + x.shape[1:]), out)
+    los, weights, noise = _records(los, weights, noise, n_pad)
+    out = _invert_core(spline, values, knots, valid, los, weights, noise, cfg, per_batch,
+                       jnp.asarray(n, jnp.int32))
+    return _unpad(out, n, tuple(batch))
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _records(los, weights, noise, n_pad):
+    """Flatten the leading axes to ``n`` records and append ``n_pad - n`` dummy records (no
+    usable beam: solved trivially, skipped where a whole batch is dummy, dropped by
+    `_unpad`). One small compilation per length, not one per eager operation."""
+    *_, h, b = los.shape
+    los, weights, noise = los.reshape(-1, h, b), weights.reshape(-1, h, b), noise.reshape(-1, h)
+    pad = n_pad - los.shape[0]
+    if pad > 0:
+        los = jnp.concatenate([los, jnp.zeros((pad, h, b), los.dtype)])
+        weights = jnp.concatenate([weights, jnp.zeros((pad, h, b), weights.dtype)])
+        noise = jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)])
+    return los, weights, noise
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2))
+def _unpad(out, n, batch):
+    """The first `n` records of `out`, with the caller's leading axes `batch`."""
+    return jax.tree_util.tree_map(lambda x: x[:n].reshape(batch + x.shape[1:]), out)
 
 
 def invert(

@@ -94,7 +94,12 @@ class Instrument:
            probe: AbstractProbe | None = None) -> Instrument:
         """The instrument of `scan` mounted as `mount` (or a sequence of mounts: their
         shared epsilon, pitch and roll) at `heights` (m), with `probe`."""
-        mounts = [] if mount is None else ([mount] if isinstance(mount, Mount) else list(mount))
+        if mount is None:
+            mounts = []
+        elif isinstance(mount, Mount):
+            mounts = list(mount) if mount.batch_shape else [mount]
+        else:
+            mounts = list(mount)
 
         def shared(name):
             vals = [_host_number(getattr(m, name)) for m in mounts]
@@ -553,7 +558,10 @@ class ResponseTable(eqx.Module):
         point = None if stacked.point_velocity is None else norm(stacked.point_velocity)
         beam_vectors = beam_velocity = None
         if mount is not None:
-            mounts = [mount] * s if isinstance(mount, Mount) else list(mount)
+            if isinstance(mount, Mount):
+                mounts = list(mount) if mount.batch_shape else [mount] * s
+            else:
+                mounts = list(mount)
             if len(mounts) != s or not all(isinstance(m, Mount) for m in mounts):
                 raise ValueError(
                     f"ResponseTable.from_simulations: `mount` must be a Mount or {s} Mounts."

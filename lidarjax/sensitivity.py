@@ -67,6 +67,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._backend import default_batch, positive_size
+from ._precision import HIGHEST
 from .angles import heading, horizontal_speed, wind_direction, wrap180
 from .batch import _is_stacked, _n_stacked, rotation_arguments, unstack_field
 from .corrections import DEFAULT_RATIO_TOL
@@ -626,7 +627,7 @@ def _covariance(names, std, correlation, fname):
 
 def _budget(jac, cov, std_in):
     """GUM: u^2 = J C J^T; contributions |J_i| u_i; variance shares J_i (C J^T)_i / u^2."""
-    cj = jnp.einsum("ij,...j->...i", cov, jac)
+    cj = jnp.einsum("ij,...j->...i", cov, jac, precision=HIGHEST)
     var = jnp.sum(jac * cj, axis=-1)
     u = jnp.sqrt(jnp.maximum(var, 0.0))
     share = jac * cj / jnp.where(var > 0, var, 1.0)[..., None]
@@ -685,13 +686,13 @@ def _uncertainty_core(field, scan, mount, heights, u_ref, probe, cfg, axes, chol
                 g = jnp.where(jnp.isfinite(g), g, 0.0)
                 value[o] = inv_val[o]
                 jac[o] = jnp.concatenate(
-                    [jnp.einsum("hb,hbp->hp", g, j_los),
+                    [jnp.einsum("hb,hbp->hp", g, j_los, precision=HIGHEST),
                      jnp.sqrt(jnp.sum(g * g, axis=-1))[:, None]], axis=-1)
         mc = {}
         if n_mc > 0:
             k1, k2 = jax.random.split(k)
             z = jax.random.normal(k1, (n_mc, p), dtype)
-            deltas = z @ chol.T.astype(dtype)
+            deltas = jnp.matmul(z, chol.T.astype(dtype), precision=HIGHEST)
 
             def sample(delta):
                 return _one(f, scan, m, heights, u, probe, delta, fcfg)
@@ -741,8 +742,9 @@ def _uncertainty_core(field, scan, mount, heights, u_ref, probe, cfg, axes, chol
     if hess is not None:  # Gaussian inputs: var(J d + d^T H d / 2) = J C J^T + tr((H C)^2) / 2
         c = cov[:p, :p]
         for o in fwd_outputs:
-            hc = jnp.einsum("...ij,jk->...ik", jnp.where(jnp.isfinite(hess[o]), hess[o], 0.0), c)
-            var2 = 0.5 * jnp.einsum("...ij,...ji->...", hc, hc)
+            hc = jnp.einsum("...ij,jk->...ik", jnp.where(jnp.isfinite(hess[o]), hess[o], 0.0), c,
+                            precision=HIGHEST)
+            var2 = 0.5 * jnp.einsum("...ij,...ji->...", hc, hc, precision=HIGHEST)
             second[o] = jnp.sqrt(jnp.maximum(var2, 0.0))
     return value, jac, std, contribution, share, mc, second
 

@@ -43,7 +43,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._backend import CPU_BATCH, default_batch
 from ._deprecated import deprecated_getattr
-from ._precision import difference
+from ._precision import HIGHEST, difference
 from .angles import horizontal_speed, wind_direction
 from .field import AbstractField
 from .forward import _beam_los, _validate
@@ -295,7 +295,7 @@ def _to_north(scan: Scan, mount: Mount, v_lidar):
     tilt when the scan compensates it (as `lidarjax.simulate`)."""
     to_north = lidar_to_north_rotation(mount)
     if scan.tilt_compensation:
-        to_north = to_north @ tilt_rotation(mount.pitch, mount.roll)
+        to_north = jnp.matmul(to_north, tilt_rotation(mount.pitch, mount.roll), precision=HIGHEST)
     return rotate(to_north, v_lidar)
 
 
@@ -328,7 +328,7 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
         rng = (z * per_height[j]).reshape(1, 1)
         frozen = _AtTime(field.origin, field.origin_lo, field, t)
         los, _ = _beam_los(frozen, origin_local + offset, n[None, :], rng, probe)
-        return los[0, 0] - jnp.dot(n, v_lidar)
+        return los[0, 0] - jnp.dot(n, v_lidar, precision=HIGHEST)
 
     if motion is None:
         # a fixed lidar: one geometry, every cycle's (h, b) LOS at their own times at once

@@ -30,7 +30,7 @@ from ..io.monitor_points import (
 )
 from ..workflows.monitor_points import monitor_points, simulate_from_monitor_points
 from ..workflows.seed_results import write_seed_results
-from ..workflows.seed_tables import settings_mounts
+from ..workflows.seed_tables import settings_mount
 from ._common import (
     add_probe_arguments,
     finite_float,
@@ -108,7 +108,7 @@ def _configuration(args):
     heights = np.asarray(args.heights if args.heights is not None else settings.heights())
     scan = make_scan(args.scan, args.cone_angle)
     probe = make_probe(args)
-    mounts = settings_mounts(settings, betas)
+    mounts = settings_mount(settings, betas)
     locs = monitor_points(scan, mounts, heights, probe)
     return settings, betas, heights, scan, probe, mounts, locs
 

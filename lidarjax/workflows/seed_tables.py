@@ -27,7 +27,8 @@ from ..mount import Mount
 from ..progress import AbstractProgress, LineProgress, progress_meter
 from ..response import ResponseTable
 
-__all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "SEED_U_REF"]
+__all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "settings_mount",
+           "settings_mounts", "SEED_U_REF"]
 
 #: The free stream hard-coded in the seed UDF (its CFD inlet), CFD frame, m/s.
 SEED_U_REF = (-15.0, 0.0, 0.0)

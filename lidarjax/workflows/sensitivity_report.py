@@ -40,12 +40,11 @@ from ..field import AbstractField
 from ..io.fields import load_field
 from ..io.seed_output import write_table_csv
 from ..io.settings import Settings, read_settings
-from ..mount import Mount
 from ..plots import plot_budget, plot_sensitivity_profiles
 from ..probe import AbstractProbe
 from ..scan import Scan
 from ..sensitivity import OUTPUTS, Budget, budget_columns, uncertainty
-from .seed_tables import SEED_U_REF
+from .seed_tables import SEED_U_REF, settings_mount
 
 __all__ = ["SensitivityReport", "sensitivity_report", "write_sensitivity_report",
            "REPORT_OUTPUTS", "REPORT_SCANS"]
@@ -195,8 +194,7 @@ def sensitivity_report(
         make, scan_name = getattr(scans, scan), scan
         kw = {"tilt_compensation": bool(tilt_compensation)}
         scan = make(**kw) if cone_angle is None else make(cone_angle, **kw)
-    mounts = [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
-                    epsilon=settings.epsilon, pitch=pitch, roll=roll) for b in betas]
+    mounts = settings_mount(settings, betas, pitch=pitch, roll=roll)
     heights = jnp.asarray(settings.heights())
     runs = _fields(fields, betas)
     budget = uncertainty(runs, scan, mounts, heights, std=std, u_ref=u_ref, probe=probe,

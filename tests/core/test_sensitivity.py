@@ -291,9 +291,10 @@ def test_batched_mount_sensitivity_equals_single_mounts():
         for o in kw["outputs"]:
             np.testing.assert_allclose(np.asarray(batch.jacobian[o])[k], one.jacobian[o],
                                        rtol=1e-12, atol=1e-14)
-    # uniform flow: the platform rotation turns the report degree for degree (as gamma does)
+    # uniform flow: the platform rotation turns the report degree for degree (as gamma does),
+    # to within the coupling of the 1-degree tilt (~1e-4)
     np.testing.assert_allclose(np.asarray(batch.jacobian["lidar_direction"])[..., 0], 1.0,
-                               rtol=1e-10)
+                               rtol=5e-4)
 
 
 def test_monte_carlo_batch_default_and_validation():
