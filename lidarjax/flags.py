@@ -61,6 +61,9 @@ class InverseFlag(enum.IntFlag):
     #: No noise level was given and there are no spare beams to estimate it (two beams for
     #: two unknowns): the standard deviations are NaN.
     NO_NOISE_ESTIMATE = 16
+    #: The input is physically impossible (a negative reported speed): NaN, never
+    #: reinterpreted (a negative speed is not read as the opposite direction).
+    IMPOSSIBLE_INPUT = 32
 
 
 class RecordFlag(enum.IntFlag):

@@ -508,7 +508,9 @@ def invert_reconstructed(
     **Arguments:**
 
     - `table`: a `ResponseTable` with `reconstructed` (e.g. from `from_simulations`).
-    - `speed`: ``(..., h)`` reported horizontal speed, m/s.
+    - `speed`: ``(..., h)`` reported horizontal speed, m/s. A negative speed is impossible:
+      that record-height is NaN, flagged `InverseFlag.IMPOSSIBLE_INPUT` (and
+      `TOO_FEW_BEAMS`), never read as the opposite direction.
     - `direction`: ``(..., h)`` reported meteorological direction, degrees (north frame);
       NaN is allowed where the speed is 0 (calm).
     - `noise`, `max_steps`, `solver`, `batch_size`: as for `invert`.
@@ -543,15 +545,19 @@ def invert_reconstructed(
     speed = jnp.broadcast_to(speed, shape).astype(dtype)
     direction = jnp.broadcast_to(direction, shape).astype(dtype)
     calm = speed == 0
+    impossible = speed < 0  # never reinterpreted as the opposite direction
     rad = jnp.deg2rad(jnp.where(calm, 0.0, direction))
     uv = jnp.stack([-speed * jnp.sin(rad), -speed * jnp.cos(rad)], axis=-1)
+    uv = jnp.where(impossible[..., None], jnp.nan, uv)
     spline = table.reconstructed_spline
     sub = PeriodicSpline(
         spline.start, spline.offsets, spline.widths, spline.coefficients[..., :2], spline.uniform
     )
     valid = jnp.ones((table.n_heights, 2), bool)
-    return _run(
+    out = _run(
         sub, table.reconstructed[..., :2], table.directions, valid, uv, None, noise,
         min_beams=2, max_steps=max_steps, solver=solver, batch_size=batch_size,
         fname="invert_reconstructed", unit="(..., h, 2)",
     )
+    flag = jnp.where(impossible, int(InverseFlag.IMPOSSIBLE_INPUT), 0).astype(out.flags.dtype)
+    return eqx.tree_at(lambda r: r.flags, out, out.flags | flag)

@@ -377,3 +377,16 @@ def test_batch_size_all_and_validation(table, random_records):
             lj.invert(table, los, batch_size=bad)
         with pytest.raises(ValueError, match="invert_reconstructed: `batch_size`"):
             lj.invert_reconstructed(table, np.ones(4), np.ones(4), batch_size=bad)
+
+
+def test_negative_reported_speed_is_impossible_not_the_opposite_direction():
+    table = sites.table(15.0)
+    h = len(sites.HEIGHTS)
+    speed = np.array([[9.0] * h, [-9.0] * h])
+    direction = np.full((2, h), 200.0)
+    inv = lj.invert_reconstructed(table, speed, direction)
+    assert np.all(np.isfinite(np.asarray(inv.speed[0])))
+    assert np.all(np.isnan(np.asarray(inv.speed[1]))) and np.all(np.isnan(np.asarray(inv.direction[1])))
+    flags = np.asarray(inv.flags[1])
+    assert np.all(flags & lj.InverseFlag.IMPOSSIBLE_INPUT) and not np.any(inv.converged[1])
+    assert not np.any(np.asarray(inv.flags[0]) & lj.InverseFlag.IMPOSSIBLE_INPUT)
