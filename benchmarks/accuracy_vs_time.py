@@ -17,7 +17,11 @@ around the default (dx = 5 m, 9 nodes, float64):
 - nodes: 1 (the point probe), 3, 5, 9, 17, 33, 65; the error against the 257-node probe on
   the same grid isolates the quadrature error;
 - float32 against float64;
-- grid spacing dx = 20, 10, 5, 2.5 m.
+- grid spacing dx = 20, 10, 5, 2.5 m;
+- *auto*: the nodes `simulate` chooses for each grid (`lidarjax.probe_for_field`, from the
+  grid's resolution: its vertical spacing dx/2);
+- *cw*: the CW probe (`lidarjax.CWProbe`, whole Lorentzian cut at the lidar) with 17, 33, 65
+  nodes and auto, against its own 257-node truth.
 
 Time is the median wall time of one compiled call for all 360 x 9 x 5 beams (compile time
 excluded). Run ``python benchmarks/accuracy_vs_time.py [--quick]``; writes
@@ -60,8 +64,13 @@ SCENES = {
 
 
 
-def probe_for(nodes):
-    return lj.PointProbe() if nodes == 1 else lj.PulsedProbe(n_nodes=nodes)
+def probe_for(nodes, field, kind="pulsed"):
+    """The probe of a configuration: ``nodes`` explicit, or ``"auto"``: what `simulate`
+    chooses for the field's resolution (`lidarjax.probe_for_field`)."""
+    make = lj.PulsedProbe if kind == "pulsed" else lj.CWProbe
+    if nodes == "auto":
+        return lj.probe_for_field(field, SCAN, HEIGHTS, make())
+    return lj.PointProbe() if nodes == 1 else make(n_nodes=nodes)
 
 
 def grid(scene, extent, dx, dtype):
@@ -72,8 +81,8 @@ def grid(scene, extent, dx, dtype):
     return lj.GridField(x, x, z, field.velocity.astype(dtype))
 
 
-def run_config(field, mounts, nodes, repeats):
-    probe = probe_for(nodes)
+def run_config(field, mounts, nodes, repeats, kind="pulsed"):
+    probe = probe_for(nodes, field, kind)
     heights = jnp.asarray(HEIGHTS, field.dtype)
 
     def fn(f, m, h, p):
@@ -85,7 +94,8 @@ def run_config(field, mounts, nodes, repeats):
     t = median_time(lambda: jax.block_until_ready(compiled(field, mounts, heights, probe)),
                     repeats)
     speed, direction = compiled(field, mounts, heights, probe)
-    return t, np.asarray(speed, np.float64), np.asarray(direction, np.float64)
+    return t, np.asarray(speed, np.float64), np.asarray(direction, np.float64), getattr(
+        probe, "n_nodes", 1)
 
 
 def errors(speed, direction, ref):
@@ -107,8 +117,10 @@ def main():
         scene = cfg["scene"]
         betas = np.arange(sectors) * 360.0 / sectors
         mounts = lj.stack_mounts([lj.Mount(cfg["lidar"], beta=b, psi=180.0) for b in betas])
-        _, *truth = run_config(scene, mounts, REF_NODES, 1)
-        _, *effect = run_config(scene, mounts, 1, 1)  # the point probe: no volume at all
+        truths = {kind: run_config(scene, mounts, REF_NODES, 1, kind)[1:3]
+                  for kind in ("pulsed", "cw")}
+        truth = truths["pulsed"]
+        effect = run_config(scene, mounts, 1, 1)[1:3]  # the point probe: no volume at all
         volume_effect = errors(*effect, truth)[0]
         print(f"{name}: probe-volume effect on the speed (point vs 257 nodes, analytic) "
               f"{volume_effect:.3f} m/s")
@@ -121,17 +133,21 @@ def main():
             return _fields[key]
 
         ref_same_grid = {}
-        configs = [(5.0, np.float64, q, "nodes") for q in node_counts]
-        configs += [(5.0, np.float32, q, "float32") for q in (1, 9)]
-        configs += [(dx, np.float64, 9, "spacing") for dx in spacings if dx != 5.0]
-        for dx, dtype, nodes, sweep in configs:
+        configs = [(5.0, np.float64, q, "nodes", "pulsed") for q in node_counts]
+        configs += [(5.0, np.float32, q, "float32", "pulsed") for q in (1, 9)]
+        configs += [(dx, np.float64, 9, "spacing", "pulsed") for dx in spacings if dx != 5.0]
+        # what simulate chooses by default: nodes for the grid's resolution (dx / 2 vertically)
+        configs += [(dx, np.float64, "auto", "auto", "pulsed") for dx in spacings]
+        configs += [(5.0, np.float64, q, "cw", "cw") for q in (17, 33, 65, "auto")]
+        for dx, dtype, nodes, sweep, kind in configs:
             field = field_for(dx, dtype)
-            if (dx, dtype) not in ref_same_grid:
-                _, *ref_same_grid[(dx, dtype)] = run_config(field, mounts, REF_NODES, 1)
-            t, speed, direction = run_config(field, mounts, nodes, repeats)
-            e_speed, e_dir = errors(speed, direction, truth)
-            q_speed, q_dir = errors(speed, direction, ref_same_grid[(dx, dtype)])
-            row = dict(scene=name, sweep=sweep, dx=dx, dtype=np.dtype(dtype).name, nodes=nodes,
+            if (dx, dtype, kind) not in ref_same_grid:
+                ref_same_grid[(dx, dtype, kind)] = run_config(field, mounts, REF_NODES, 1, kind)[1:3]
+            t, speed, direction, nodes = run_config(field, mounts, nodes, repeats, kind)
+            e_speed, e_dir = errors(speed, direction, truths[kind])
+            q_speed, q_dir = errors(speed, direction, ref_same_grid[(dx, dtype, kind)])
+            row = dict(scene=name, sweep=sweep, probe=kind, dx=dx, dtype=np.dtype(dtype).name,
+                       nodes=nodes,
                        time_ms=1e3 * t, speed_error=e_speed, direction_error=e_dir,
                        speed_error_vs_257_same_grid=q_speed,
                        direction_error_vs_257_same_grid=q_dir,
@@ -162,13 +178,14 @@ def write_table(rows, path):
         f"{REF_NODES}-node probe (float64); *quadrature* is against {REF_NODES} nodes on the "
         "same grid. Time: one compiled call, median.",
         "",
-        "| scene | sweep | dx (m) | dtype | nodes | time (ms) | speed error (m/s) | "
+        "| scene | sweep | probe | dx (m) | dtype | nodes | time (ms) | speed error (m/s) | "
         "quadrature (m/s) | direction error (deg) |",
-        "|---|---|---:|---|---:|---:|---:|---:|---:|",
+        "|---|---|---|---:|---|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
-            f"| {r['scene']} | {r['sweep']} | {r['dx']:g} | {r['dtype']} | {r['nodes']} | "
+            f"| {r['scene']} | {r['sweep']} | {r['probe']} | {r['dx']:g} | {r['dtype']} | "
+            f"{r['nodes']} | "
             f"{r['time_ms']:.2f} | {r['speed_error']:.2e} | "
             f"{r['speed_error_vs_257_same_grid']:.2e} | {r['direction_error']:.2e} |")
     effects = {r["scene"]: r["probe_volume_effect"] for r in rows}
@@ -185,7 +202,7 @@ def plot(rows, path):
 
     scenes = sorted({r["scene"] for r in rows}, reverse=True)
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.5 * len(scenes), 4.3))
-    markers = {"nodes": "o", "float32": "s", "spacing": "^"}
+    markers = {"nodes": "o", "float32": "s", "spacing": "^", "auto": "*", "cw": "D"}
     for ax, scene in zip(np.atleast_1d(axes), scenes, strict=True):
         sel = [r for r in rows if r["scene"] == scene]
         for sweep, marker in markers.items():
@@ -193,14 +210,15 @@ def plot(rows, path):
             ax.loglog([r["time_ms"] for r in pts], [max(r["speed_error"], 1e-9) for r in pts],
                       marker, label=sweep, ms=7)
             for r in pts:
-                label = (f"q={r['nodes']}" if sweep == "nodes" else
-                         f"f32 q={r['nodes']}" if sweep == "float32" else f"dx={r['dx']:g}")
+                label = (f"q={r['nodes']}" if sweep in ("nodes", "cw") else
+                         f"f32 q={r['nodes']}" if sweep == "float32" else
+                         f"dx={r['dx']:g} q={r['nodes']}" if sweep == "auto" else f"dx={r['dx']:g}")
                 ax.annotate(label, (r["time_ms"], max(r["speed_error"], 1e-9)), fontsize=7,
                             xytext=(3, 3), textcoords="offset points")
-        front = pareto([(r["time_ms"], r["speed_error"]) for r in sel])
+        front = pareto([(r["time_ms"], r["speed_error"]) for r in sel if r["probe"] == "pulsed"])
         ax.loglog(*zip(*front, strict=True), "k-", lw=0.8, alpha=0.5, label="Pareto front")
         ax.set(xlabel="time per call (ms)", ylabel="max horizontal speed error (m/s)",
-               title=f"{scene}: {sel[0]['sectors']} sectors x {HEIGHTS.size} heights, V2 + pulsed")
+               title=f"{scene}: {sel[0]['sectors']} sectors x {HEIGHTS.size} heights, V2")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()

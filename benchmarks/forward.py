@@ -3,8 +3,9 @@
 What it measures, on one (200, 200, 100, 3) gridded field (the hill scene, 10 m x 10 m x
 5 m cells) and the same sample points for every implementation:
 
-- **pipeline**: a Windcube V2 scan (5 beams) with the default pulsed probe (9 nodes) at 20
-  heights, seen from ``s`` mounts (platform rotations, the "sectors"); N = s x 20 x 5 x 9
+- **pipeline**: a Windcube V2 scan (5 beams) with the default pulsed probe (the nodes
+  `simulate` chooses for this grid's 5 m resolution, `lidarjax.probe_for_field`) at 20
+  heights, seen from ``s`` mounts (platform rotations, the "sectors"); N = s x 20 x 5 x q
   samples from about 1e3 to 1e6. Each implementation computes the beam points, samples
   and projects the field, applies the probe weights and the symmetric cut at the lidar,
   reconstructs the wind (DBS) and rotates it to north:
@@ -60,7 +61,9 @@ HILL = lj.scenes.hill(height=60.0, half_width=300.0, speed=10.0, direction=250.0
 LIDAR = np.array([0.0, 0.0, 62.0])  # on the crest, 2 m above ground
 HEIGHTS = np.arange(20.0, 220.0, 10.0)  # 20 heights
 SCAN = lj.windcube_v2(28.0)
-PROBE = lj.PulsedProbe()  # 9 nodes
+# the nodes simulate chooses for this grid (its resolution: the 5.05 m vertical spacing)
+PROBE = lj.probe_for_spacing(lj.PulsedProbe(), float(Z[1] - Z[0]),
+                             HEIGHTS[:, None] / np.asarray(SCAN.directions())[None, :, 2])
 
 
 

@@ -53,6 +53,7 @@ from .flags import InverseFlag as InverseFlag
 from .flags import RecordFlag as RecordFlag
 from .footprint import scan_bounds as scan_bounds
 from .forward import Simulation as Simulation
+from .forward import probe_for_field as probe_for_field
 from .forward import simulate as simulate
 from .frames import beam_directions as beam_directions
 from .frames import body_to_cfd_rotation as body_to_cfd_rotation
@@ -107,7 +108,6 @@ from .sensitivity import sensitivity as sensitivity
 from .sensitivity import uncertainty as uncertainty
 from .series import Series as Series
 from .series import SeriesStatistics as SeriesStatistics
-from .series import probe_for_field as probe_for_field
 from .series import simulate_series as simulate_series
 from .series import simulate_statistics as simulate_statistics
 from .series import statistics as statistics

@@ -48,6 +48,15 @@ class AbstractField(eqx.Module):
         """The working floating dtype of this field: results of `simulate` follow it."""
         return self.origin.dtype
 
+    @property
+    def resolution(self) -> float | None:
+        """The field's smallest length scale (field length units): a grid's smallest node
+        spacing, a turbulence box's, a scene's smallest feature; ``None`` where the field has
+        none (uniform or linear flow) or it is not known on the host. Probe nodes are chosen
+        for it (`lidarjax.probe_for_field`): content up to ``pi / resolution`` rad/m along
+        the beam is integrated within 0.01 of the probe's transfer function."""
+        return None
+
     def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
         """Velocity (m/s, CFD frame) at points relative to `origin` (metres). NaN outside."""
         raise NotImplementedError
@@ -240,6 +249,15 @@ class GridField(AbstractField):
     index_scale: Float[Array, 3]
     index_start: Float[Array, 3]
     uniform: tuple[bool, bool, bool] = eqx.field(static=True)
+
+    @property
+    def resolution(self) -> float | None:
+        """The grid's smallest node spacing (field length units; ``None`` when traced)."""
+        if not is_concrete(self.x_local, self.y_local, self.z_local):
+            return None
+        steps = [np.diff(np.asarray(a, np.float64)) for a in (self.x_local, self.y_local, self.z_local)]
+        steps = np.concatenate([d[d > 0] for d in steps])
+        return float(steps.min()) if steps.size else None
 
     def __init__(self, x, y, z, velocity, *, uniform=None):
         host = velocity if isinstance(velocity, np.ndarray) else None

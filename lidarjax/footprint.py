@@ -70,10 +70,9 @@ def scan_bounds(
     if isinstance(probe, PointProbe):
         near, far = ranges, ranges
     else:
-        offsets, _ = probe.nodes(ranges)
-        offsets = np.asarray(offsets, np.float64)
-        offsets = np.broadcast_to(offsets, ranges.shape + offsets.shape[-1:])
-        reach = np.minimum(np.abs(offsets).max(axis=-1), ranges)  # the cut at the lidar
+        # the probe's whole support, cut at the lidar: covers its nodes at any node count
+        # (`simulate` may choose more for the field's resolution)
+        reach = np.minimum(np.asarray(probe.support(ranges), np.float64), ranges)
         near, far = ranges - reach, ranges + reach
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)

@@ -28,10 +28,38 @@ from .frames import (
     tilt_rotation,
 )
 from .mount import Mount
-from .probe import AbstractProbe, PointProbe
+from .probe import AbstractProbe, PointProbe, probe_for_ranges
 from .scan import ILL_CONDITIONED, Scan, reconstruct
 
-__all__ = ["Simulation", "simulate"]
+__all__ = ["Simulation", "simulate", "probe_for_field"]
+
+
+def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractProbe,
+                    *, caller: str = "probe_for_field") -> AbstractProbe:
+    """The probe `field` is sampled with: `probe` with its quadrature nodes chosen for the
+    field's resolution (`AbstractField.resolution`: a grid's or turbulence box's spacing, a
+    scene's smallest length scale) at the focus ranges of `scan` at `heights` (m), by
+    `lidarjax.probe.probe_for_spacing` (transfer function within 0.01 of the weighting's up
+    to the field's Nyquist wavenumber, fewest nodes).
+
+    The one place `simulate`, `simulate_rotations`, `sensitivity`, `uncertainty`, the
+    response tables built from them and the series choose nodes. An explicit node count
+    (``PulsedProbe(n_nodes=17)``, `with_nodes`) wins, and so do the point probe, a field
+    that states no length scale (uniform, linear and power-law scenes: the probe's default
+    count) and traced inputs. The choice is cached: the same field and heights give the same
+    static node count, so nothing recompiles. Warns (naming `caller`) when no node count up
+    to `lidarjax.probe.MAX_NODES` reaches the tolerance."""
+    if isinstance(probe, PointProbe) or not getattr(probe, "auto_nodes", False):
+        return probe
+    try:
+        resolution = field.resolution
+        if resolution is None:
+            return probe
+        n_body = np.asarray(scan.directions(), np.float64)
+        h = np.atleast_1d(np.asarray(heights, np.float64))
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        return probe
+    return probe_for_ranges(probe, resolution, h[:, None] / n_body[None, :, 2], caller=caller)
 
 
 class Simulation(eqx.Module):
@@ -172,7 +200,9 @@ def simulate(
       and the ``cff_*`` factors. Without it none of that is compiled.
     - `probe`: probe volume (default `lidarjax.PointProbe`, which compiles no quadrature;
       `lidarjax.PulsedProbe`, `lidarjax.CWProbe` average along each beam, in the field's
-      length units: see `lidarjax.probe`). `points` stay the focus points.
+      length units: see `lidarjax.probe`). `points` stay the focus points. A probe built
+      without an explicit `n_nodes` gets the nodes the field's resolution needs
+      (`probe_for_field`).
     - `point_reference`: also sample the true wind directly above the lidar (static).
     - `ratio_tol`: relative tolerance of correction-factor denominators (see
       `lidarjax.corrections`).
@@ -188,6 +218,7 @@ def simulate(
     if probe is None:
         probe = PointProbe()
     _validate(field, scan, mount, heights, u_ref, probe)
+    probe = probe_for_field(field, scan, heights, probe, caller="simulate")
     heights = jnp.atleast_1d(jnp.asarray(heights))
     if not jnp.issubdtype(heights.dtype, jnp.floating):
         heights = heights.astype(field.dtype)
@@ -259,7 +290,10 @@ def _probe_mean_jvp(primals, tangents):
     ok = jnp.isfinite(mean)
     use = ahead & ok[..., None]
     total = jnp.sum(kept, axis=-1)
-    d_mean = jnp.sum(jnp.where(use, kept * d_los + d_kept * los_q, 0), axis=-1)
+    # NaN node values are zeroed before they multiply a tangent: the transpose (reverse mode)
+    # would otherwise multiply a zero cotangent by them (range-dependent weights)
+    los_safe = jnp.where(use, los_q, 0)
+    d_mean = jnp.sum(jnp.where(use, kept * d_los + d_kept * los_safe, 0), axis=-1)
     d_mean = d_mean - jnp.where(ok, mean, 0) * jnp.sum(d_kept, axis=-1)
     return mean, d_mean / jnp.where(total > 0, total, 1)
 

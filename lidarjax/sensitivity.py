@@ -193,6 +193,10 @@ class _Scaled(AbstractField):
     inner: AbstractField
     factor: Float[Array, ""]
 
+    @property
+    def resolution(self) -> float | None:
+        return self.inner.resolution
+
     def sample_local(self, points):
         return self.factor * self.inner.sample_local(points)
 

@@ -33,8 +33,6 @@ directions meteorological degrees (where the wind comes from, clockwise from nor
 
 from __future__ import annotations
 
-import warnings
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -46,7 +44,7 @@ from ._deprecated import deprecated_getattr
 from ._precision import HIGHEST, difference
 from .angles import horizontal_speed, wind_direction
 from .field import AbstractField
-from .forward import _beam_los, _validate
+from .forward import _beam_los, _validate, probe_for_field
 from .frames import (
     body_to_cfd_rotation,
     cfd_to_north_rotation,
@@ -57,7 +55,7 @@ from .frames import (
 )
 from .motion import AbstractMotion
 from .mount import Mount
-from .probe import AbstractProbe, PointProbe, _refine_probe
+from .probe import AbstractProbe, PointProbe
 from .scan import Scan, reconstruct
 from .timing import Schedule, schedule_for
 
@@ -113,6 +111,10 @@ class _AtTime(AbstractField):
     field: AbstractField
     time: Float[Array, ...]
 
+    @property
+    def resolution(self) -> float | None:
+        return self.field.resolution
+
     def _time(self, points):
         t = self.time
         return t if t.ndim >= points.ndim - 1 else t[..., None]
@@ -122,36 +124,6 @@ class _AtTime(AbstractField):
 
     def los_local(self, points, directions):
         return self.field.los_local_at(points, directions, self._time(points))
-
-
-def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractProbe,
-                    *, caller: str = "probe_for_field") -> AbstractProbe:
-    """`probe` with enough quadrature nodes for the turbulence box of `field`
-    (`lidarjax.probe.probe_for_spacing` over the focus ranges of `scan` at `heights`, m),
-    what `simulate_series` and `simulate_statistics` sample with by default. Warns (naming
-    `caller`) when no node count resolves the box. Fields without a box, the point probe and
-    traced inputs: `probe` as given."""
-    box = getattr(field, "box", None)
-    if box is None or isinstance(probe, PointProbe):
-        return probe
-
-    try:
-        spacing = float(np.min(np.asarray(box.spacing, np.float64)))
-        n_body = np.asarray(scan.directions(), np.float64)
-        h = np.atleast_1d(np.asarray(heights, np.float64))
-    except jax.errors.TracerArrayConversionError:
-        return probe
-    ranges = h[:, None] / n_body[None, :, 2]
-    refined, err, tol = _refine_probe(probe, spacing, ranges)
-    if err > tol:
-        warnings.warn(
-            f"{caller}: {type(probe).__name__} cannot integrate its weighting over the turbulence "
-            f"box's {spacing:g} m spacing at focus ranges up to {np.max(ranges):.0f} m (its node "
-            f"rule's transfer is off by up to {err:.2f} below the box's Nyquist wavenumber even "
-            f"with {refined.n_nodes} nodes): LOS variance at short wavelengths is aliased. Use a "
-            f"coarser box or lower heights, or refine_probe=False to keep the probe as given.",
-            stacklevel=3)
-    return refined
 
 
 def _check_span(times, schedule: Schedule, n_heights: int):
@@ -225,12 +197,11 @@ def simulate_series(
     - `motion`: platform motion (`lidarjax.motion`), default none.
     - `point_dt`: sampling interval of the point sensors, s (1 Hz by default; a sonic logs
       at 10-20 Hz: 0.05).
-    - `refine_probe`: for a field with a turbulence box (`FrozenTurbulence`), integrate the
-      probe's weighting with enough quadrature nodes for the box's resolution
-      (`lidarjax.probe.probe_for_spacing`: a pulsed probe needs 25 nodes for a 4 m box,
-      where its default 9 alias waves shorter than about 40 m); the weighting is unchanged.
-      Warns when no node count resolves the box (a CW probe at long range). ``False`` keeps
-      the probe's nodes as given.
+    - `refine_probe`: a probe built without an explicit `n_nodes` integrates its weighting
+      with the nodes the field's resolution needs (`lidarjax.probe_for_field`, the same
+      choice as `simulate`: for a turbulence box, its spacing; a pulsed probe needs 17 nodes
+      for a 4 m box, where 9 alias waves shorter than about 30 m); the weighting is
+      unchanged, and an explicit count wins. ``False`` keeps the probe's nodes as given.
 
     **Returns:** a `Series`. Raises `ValueError` before compiling for bad inputs.
     """

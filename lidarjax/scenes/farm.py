@@ -251,6 +251,15 @@ class WindFarm(AbstractField):
     model: str = eqx.field(static=True)
     combination: str = eqx.field(static=True)
 
+    @property
+    def resolution(self) -> float | None:
+        """A sixth of the smallest rotor diameter: a Gaussian wake of width ``sigma >= 0.2 D``
+        has a spectrum below 1e-3 of its peak beyond ``k = 3.7 / sigma``, the Nyquist
+        wavenumber of a spacing ``0.85 sigma``."""
+        if not is_concrete(self.diameter):
+            return None
+        return float(np.min(np.asarray(self.diameter, np.float64))) / 6.0
+
     def __check_init__(self):
         if self.model not in MODELS:
             raise ValueError(f"WindFarm: unknown model {self.model!r}; choose one of {MODELS}.")

@@ -142,6 +142,15 @@ class FrozenTurbulence(AbstractField):
     anchor: Float[Array, 3]
     shift: Float[Array, ""]
 
+    @property
+    def resolution(self) -> float | None:
+        """The box's smallest node spacing (or the mean field's resolution, if finer)."""
+        scales = [self.mean.resolution]
+        if is_concrete(self.box.spacing):
+            scales.append(float(np.min(np.asarray(self.box.spacing, np.float64))))
+        scales = [v for v in scales if v is not None]
+        return min(scales) if scales else None
+
     def __init__(self, mean, box, speed, direction, *, anchor=(0.0, 0.0, 0.0), shift=0.0):
         if not isinstance(mean, AbstractField):
             raise ValueError(

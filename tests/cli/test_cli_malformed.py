@@ -7,6 +7,7 @@ Fast by design: `lidarjax.cli.main` runs in-process, the table is a small analyt
 compiled shape. Only the two signal tests start a subprocess.
 """
 
+import copy
 import json
 import os
 import signal
@@ -637,7 +638,10 @@ def test_compilation_cache_folder_and_opt_out(monkeypatch, tmp_path):
 def test_old_table_without_metadata_warns_and_corrects(case, capsys, tmp_path):
     table = lj.io.load_table(case["table"])
     old = tmp_path / "old_table.npz"
-    save_table(old, table, {"scan": "windcube_v2"})  # as written before the instrument facts
+    # as written before the instrument facts: the scan's name only
+    bare = copy.copy(table)
+    object.__setattr__(bare, "instrument", None)
+    save_table(old, bare, {"scan": "windcube_v2"})
     out = tmp_path / "old_out.csv"
     rc, text, err = run_cli(["correct", "--table", old, "--records", case["root"] / "good.sta",
                              "--out", out, "--quiet", "--no-netcdf"], capsys)

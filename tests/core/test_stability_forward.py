@@ -147,8 +147,8 @@ MODEL_R = 0.35
 UTM = np.array([512_345.678, 6_123_456.789, 3.0])  # easting, northing, ground datum
 PROBES = {
     "point": lj.PointProbe(),
-    # 1:100 model scale; 4 nodes (even: no node at the focus) are all cut at the lowest
-    # heights, where the probe falls back to its focus
+    # 1:100 model scale; 4 nodes (even: no node at the focus) laid over the support cut at
+    # the lidar, down to the lowest heights
     "pulsed": lj.PulsedProbe(n_nodes=4).scaled(100.0),
     "cw": lj.CWProbe().scaled(100.0),
 }
@@ -286,14 +286,26 @@ def test_nan_results_masked_out_of_a_loss_keep_its_gradient_finite(field, probe)
         assert float(g[i]) == pytest.approx(float(fd), rel=1e-5, abs=1e-6), i
 
 
-def test_even_node_probe_cut_to_nothing_falls_back_to_its_focus():
-    """An even node count has no node at the focus: below the innermost offset the cut at
-    the lidar used to keep nothing (LOS 0/0 = NaN, mislabelled BEAM_OUTSIDE)."""
-    probe = lj.PulsedProbe(n_nodes=4)  # innermost nodes at +-16.7 m
+def test_even_node_probe_below_its_innermost_offset_still_averages():
+    """An even node count has no node at the focus. A fixed rule cut at the lidar used to
+    keep no node below the innermost offset (LOS 0/0 = NaN, mislabelled BEAM_OUTSIDE); the
+    rule is now laid over the cut support, so at 5 m all four nodes average the field within
+    5 m of the focus (flagged: the cut drops most of the weighting)."""
+    probe = lj.PulsedProbe(n_nodes=4)
     mount = lj.Mount([3.0, 2.0, 20.5])
     heights = jnp.array([5.0, 80.0])
+    offsets, _ = probe.nodes(jnp.array(5.0))
+    np.testing.assert_allclose(offsets, [-3.75, -1.25, 1.25, 3.75])
     sim = lj.simulate(SHOULDER, lj.windcube_v2(), mount, heights, probe=probe)
     point = lj.simulate(SHOULDER, lj.windcube_v2(), mount, heights)
     assert sim.flags[0] == lj.Flag.PROBE_TRUNCATED and sim.flags[1] == 0
-    np.testing.assert_array_equal(sim.los[0], point.los[0])
+    assert np.all(np.isfinite(sim.los))
+    # by hand: the four nodes within the focus range of the focus, renormalised
+    for b in range(5):
+        n = np.asarray(sim.directions[b])
+        r = float(5.0 / np.cos(np.radians(28.0))) if b < 4 else 5.0
+        o, w = (np.asarray(a) for a in probe.nodes(jnp.array(r)))
+        pts = np.array([3.0, 2.0, 20.5]) + (r + o)[:, None] * n
+        expected = np.sum(w * (np.asarray(SHOULDER.sample(pts)) @ n)) / np.sum(w)
+        assert float(sim.los[0, b]) == pytest.approx(expected, rel=1e-9)
     assert np.all(np.abs(sim.los[1] - point.los[1]) > 1e-6)  # a real volume average above

@@ -5,6 +5,7 @@ and the same `Simulation` as `simulate` on the field itself."""
 import re
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -178,6 +179,34 @@ def test_mismatched_configuration_is_refused(case, tmp_path):
 REAL = DATA / "openfoam_probes" / "turbineSiting"
 
 
+class GaussPulsedProbe(lj.AbstractProbe):
+    """The pulsed weighting on the 9-node Gauss-Legendre rule the committed OpenFOAM output
+    was sampled at (lidarjax before nodes followed the field's resolution; the weighting is
+    `lj.PulsedProbe`'s): any `AbstractProbe` drives the monitor points and the forward model."""
+
+    pulsed: lj.PulsedProbe = lj.PulsedProbe()
+
+    def nodes(self, focus_range):
+        x, w = np.polynomial.legendre.leggauss(9)
+        x, w = 0.5 * (x - x[::-1]), 0.5 * (w + w[::-1])
+        offsets = self.support() * jnp.asarray(x)
+        weights = jnp.asarray(w / w.sum()) * self.weight(offsets)
+        return offsets, weights / jnp.sum(weights)
+
+    def weight(self, offset, focus_range=None):
+        return self.pulsed.weight(offset)
+
+    def support(self, focus_range=None):
+        return self.pulsed.support(focus_range)
+
+    def scaled(self, factor):
+        return GaussPulsedProbe(self.pulsed.scaled(factor))
+
+    @property
+    def tail(self):
+        return self.pulsed.tail
+
+
 def test_real_openfoam_probes_output_reads_back_through_the_forward_model():
     """OpenFOAM v1912's own probes output (turbineSiting, see RECIPE.md) at the points of
     `lidarjax monitor-points`: the probe list is recovered exactly from the configuration, the header
@@ -189,7 +218,7 @@ def test_real_openfoam_probes_output_reads_back_through_the_forward_model():
     settings = read_settings(REAL / "settings.dat")
     mounts = settings_mounts(settings, [0.0, 90.0])
     heights = HEIGHTS
-    probe = lj.PulsedProbe()
+    probe = GaussPulsedProbe()
     locs = lj.monitor_points(SCAN, mounts, heights, probe)
     written = read_monitor_points_csv(REAL / "lidarProbes.csv")
     assert written.names == locs.names
