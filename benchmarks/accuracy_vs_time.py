@@ -54,11 +54,13 @@ SCENES = {
         scene=lj.scenes.power_law(10.0, 100.0, 0.2, 270.0, veer=0.05),
         lidar=(0.0, 0.0, 0.0),
         extent=(200.0, 280.0),
+        cw_extent=(230.0, 470.0),  # the CW probe reaches twice the focus range
     ),
     "hill": dict(
         scene=lj.scenes.hill(height=60.0, half_width=200.0, speed=10.0, direction=250.0),
         lidar=(0.0, 0.0, 62.0),
         extent=(200.0, 340.0),
+        cw_extent=(230.0, 530.0),
     ),
 }
 
@@ -126,10 +128,11 @@ def main():
               f"{volume_effect:.3f} m/s")
         fields = {}
 
-        def field_for(dx, dtype, _fields=fields, _scene=scene, _cfg=cfg):
-            key = (dx, dtype)
+        def field_for(dx, dtype, kind="pulsed", _fields=fields, _scene=scene, _cfg=cfg):
+            key = (dx, dtype, kind)
             if key not in _fields:
-                _fields[key] = grid(_scene, _cfg["extent"], dx, dtype)
+                extent = _cfg["extent"] if kind == "pulsed" else _cfg["cw_extent"]
+                _fields[key] = grid(_scene, extent, dx, dtype)
             return _fields[key]
 
         ref_same_grid = {}
@@ -140,7 +143,7 @@ def main():
         configs += [(dx, np.float64, "auto", "auto", "pulsed") for dx in spacings]
         configs += [(5.0, np.float64, q, "cw", "cw") for q in (17, 33, 65, "auto")]
         for dx, dtype, nodes, sweep, kind in configs:
-            field = field_for(dx, dtype)
+            field = field_for(dx, dtype, kind)
             if (dx, dtype, kind) not in ref_same_grid:
                 ref_same_grid[(dx, dtype, kind)] = run_config(field, mounts, REF_NODES, 1, kind)[1:3]
             t, speed, direction, nodes = run_config(field, mounts, nodes, repeats, kind)
