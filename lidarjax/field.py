@@ -225,6 +225,10 @@ class GridField(AbstractField):
       Its floating dtype is the field's working dtype.
     - `uniform`: per-axis override of the uniform-spacing detection (needed only when the
       coordinates are traced, e.g. built inside `jax.jit`).
+    - `resolution`: the field's smallest length scale in metres, where it is coarser than the
+      grid (a smooth CFD solution on a fine mesh: the probe then needs fewer nodes). Probe
+      nodes are chosen for it (`lidarjax.probe_for_field`); default: the smallest node
+      spacing, which is right for a turbulence box or an LES. Kept by `crop` and stacking.
 
     Coordinates are stored relative to the first node (`origin`), so float32 fields at UTM
     coordinates interpolate as accurately as fields near zero. A field cut out of another by
@@ -249,17 +253,28 @@ class GridField(AbstractField):
     index_scale: Float[Array, 3]
     index_start: Float[Array, 3]
     uniform: tuple[bool, bool, bool] = eqx.field(static=True)
+    stated_resolution: float | None = eqx.field(static=True)
 
     @property
     def resolution(self) -> float | None:
-        """The grid's smallest node spacing (field length units; ``None`` when traced)."""
+        """The field's smallest length scale (m): the `resolution` it was built with, else the
+        grid's smallest node spacing (``None`` when traced)."""
+        if self.stated_resolution is not None:
+            return self.stated_resolution
         if not is_concrete(self.x_local, self.y_local, self.z_local):
             return None
         steps = [np.diff(np.asarray(a, np.float64)) for a in (self.x_local, self.y_local, self.z_local)]
         steps = np.concatenate([d[d > 0] for d in steps])
         return float(steps.min()) if steps.size else None
 
-    def __init__(self, x, y, z, velocity, *, uniform=None):
+    def __init__(self, x, y, z, velocity, *, uniform=None, resolution=None):
+        if resolution is not None:
+            r = np.asarray(resolution, np.float64)
+            if r.shape != () or not np.isfinite(r) or not r > 0:
+                raise ValueError(f"GridField: `resolution` must be one finite positive length "
+                                 f"(m), got {resolution!r}.")
+            resolution = float(r)
+        self.stated_resolution = resolution
         host = velocity if isinstance(velocity, np.ndarray) else None
         kind = getattr(velocity, "dtype", None)
         if kind is None:

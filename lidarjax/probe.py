@@ -24,7 +24,8 @@ k o)`` along the beam to ``W_q(k) = sum_q w_q cos(k o_q)``; the weighting's own 
 function is ``exp(-(k rp)^2/4) sinc(k Dp/2)`` (pulsed) or ``exp(-G |k|)`` (CW), and a rule
 follows it only up to some wavenumber, beyond which it aliases. A field carries content up
 to its Nyquist wavenumber ``pi / resolution`` (`lidarjax.AbstractField.resolution`: a grid's
-or turbulence box's spacing, a scene's smallest length scale), so `simulate`, the rotations,
+or turbulence box's spacing, or the coarser scale a `GridField` of a smooth solution is built
+with, a scene's smallest length scale), so `simulate`, the rotations,
 `sensitivity`, `uncertainty`, the tables built from them and the series all take their nodes
 from one place, `lidarjax.probe_for_field` -> `probe_for_spacing`: the fewest nodes whose
 ``|W_q - W|`` stays within `TRANSFER_TOL` (0.01) for every wavenumber up to ``pi /

@@ -399,3 +399,22 @@ def test_scan_bounds_hold_the_nodes_simulate_chooses():
         for r in (40.0, 120.0 / np.cos(np.radians(28.0))):
             o, _ = refined.nodes(jnp.array(r))
             assert r + float(np.max(o)) <= np.linalg.norm(np.maximum(np.abs(lo), np.abs(hi))) + 1e-9
+
+
+def test_a_grid_states_a_coarser_resolution_for_a_smooth_field():
+    """A smooth field on a fine grid: the stated resolution, not the spacing, sets the nodes
+    (and survives crop); nonsense is refused in one line."""
+    x = np.linspace(-200.0, 200.0, 81)  # 5 m
+    z = np.linspace(0.0, 300.0, 121)  # 2.5 m
+    fine = lj.GridField.from_function(LINEAR.sample, x, x, z)
+    smooth = lj.GridField(x, x, z, fine.velocity, resolution=20.0)
+    scan, heights = lj.windcube_v2(), np.array([60.0, 120.0])
+    assert fine.resolution == pytest.approx(2.5) and smooth.resolution == 20.0
+    many = lj.probe_for_field(fine, scan, heights, PULSED).n_nodes
+    few = lj.probe_for_field(smooth, scan, heights, PULSED).n_nodes
+    assert few < many
+    lo, hi = lj.scan_bounds(scan, MOUNT, heights, probe=PULSED)
+    assert smooth.crop(lo, hi).resolution == 20.0
+    for bad in (0.0, -1.0, np.nan, [1.0, 2.0]):
+        with pytest.raises(ValueError, match="resolution"):
+            lj.GridField(x, x, z, fine.velocity, resolution=bad)
