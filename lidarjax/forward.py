@@ -55,11 +55,17 @@ def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractPr
         resolution = field.resolution
         if resolution is None:
             return probe
-        n_body = np.asarray(scan.directions(), np.float64)
-        h = np.atleast_1d(np.asarray(heights, np.float64))
+        ranges = np.asarray(_focus_ranges(scan, jnp.atleast_1d(jnp.asarray(heights))), np.float64)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         return probe
-    return probe_for_ranges(probe, resolution, h[:, None] / n_body[None, :, 2], caller=caller)
+    return probe_for_ranges(probe, resolution, ranges, caller=caller)
+
+
+@eqx.filter_jit
+def _focus_ranges(scan, heights):
+    """Focus ranges ``(h, b)`` of `scan`'s beams at `heights`, as `simulate` computes them (one
+    compiled call: `probe_for_field` runs on every `simulate` call)."""
+    return heights[:, None] / scan.directions()[None, :, 2]
 
 
 class Simulation(eqx.Module):

@@ -222,6 +222,13 @@ def _midpoints(n: int) -> np.ndarray:
     return x
 
 
+@functools.lru_cache(maxsize=64)
+def _reference_nodes(cls: str, n_nodes, dtype) -> jax.Array:
+    """`_midpoints` of a checked node count as a `dtype` array (built once per count)."""
+    n, _ = _check_nodes_tail(cls, n_nodes, 0.5)
+    return jnp.asarray(_midpoints(n), dtype)
+
+
 def _pulsed_rule(xp, erf, support, r, rp, dp, x):
     """Midpoint rule of the pulsed weighting over the support cut at the lidar, ``|o| <
     h = min(support, r)`` for focus ranges `r` ``(...)``: offsets ``h * x`` ``(..., n)``
@@ -333,7 +340,7 @@ class PulsedProbe(AbstractProbe):
         dtype = default_float()
         self.tail = jnp.asarray(t, dtype)
         self.truncation = jnp.asarray(special.erfcinv(t), dtype)
-        self.ref_nodes = jnp.asarray(_midpoints(n), dtype)
+        self.ref_nodes = _reference_nodes("PulsedProbe", n, jnp.dtype(dtype))
 
     @property
     def n_nodes(self) -> int:
@@ -389,11 +396,15 @@ class PulsedProbe(AbstractProbe):
         return self._with_rule(n_nodes, resolution, auto=False)
 
     def _with_rule(self, n_nodes, resolution, *, auto: bool) -> PulsedProbe:
-        ref = PulsedProbe(n_nodes=None if auto else n_nodes, tail=float(self.tail))
-        nodes = jnp.asarray(_midpoints(_check_nodes_tail("PulsedProbe", n_nodes, 0.5)[0]),
-                            self.ref_nodes.dtype)
-        return eqx.tree_at(lambda p: (p.pulse_fwhm, p.gate_length, p.ref_nodes), ref,
-                           (self.pulse_fwhm, self.gate_length, nodes))
+        nodes = _reference_nodes("PulsedProbe", n_nodes, self.ref_nodes.dtype)
+        base = self
+        if auto != self.auto_nodes:  # a static flag: a new instance carrying these numbers
+            base = eqx.tree_at(lambda p: (p.pulse_fwhm, p.gate_length, p.tail, p.truncation),
+                               PulsedProbe(n_nodes=None if auto else n_nodes),
+                               (self.pulse_fwhm, self.gate_length, self.tail, self.truncation))
+        elif self.n_nodes == nodes.shape[0]:
+            return self
+        return eqx.tree_at(lambda p: p.ref_nodes, base, nodes)
 
     def scaled(self, factor) -> PulsedProbe:
         """Pulse and gate lengths divided by `factor` (model scale ``1:factor``; one finite
@@ -459,7 +470,7 @@ class CWProbe(AbstractProbe):
         self.tail = jnp.asarray(t, dtype)
         self.resolution = (jnp.asarray(np.inf, dtype) if resolution is None
                            else _param("CWProbe: resolution", resolution))
-        self.ref_nodes = jnp.asarray(_midpoints(n), dtype)
+        self.ref_nodes = _reference_nodes("CWProbe", n, jnp.dtype(dtype))
 
     @property
     def n_nodes(self) -> int:
@@ -513,13 +524,14 @@ class CWProbe(AbstractProbe):
         return self._with_rule(n_nodes, resolution, auto=False)
 
     def _with_rule(self, n_nodes, resolution, *, auto: bool) -> CWProbe:
-        ref = CWProbe(n_nodes=None if auto else n_nodes)
+        nodes = _reference_nodes("CWProbe", n_nodes, self.ref_nodes.dtype)
         res = self.resolution if resolution is None else jnp.asarray(resolution, self.resolution.dtype)
-        nodes = jnp.asarray(_midpoints(_check_nodes_tail("CWProbe", n_nodes, 0.5)[0]),
-                            self.ref_nodes.dtype)
-        return eqx.tree_at(
-            lambda p: (p.wavelength, p.aperture_radius, p.tail, p.resolution, p.ref_nodes), ref,
-            (self.wavelength, self.aperture_radius, self.tail, res, nodes))
+        base = self
+        if auto != self.auto_nodes:  # a static flag: a new instance carrying these numbers
+            base = eqx.tree_at(lambda p: (p.wavelength, p.aperture_radius, p.tail),
+                               CWProbe(n_nodes=None if auto else n_nodes),
+                               (self.wavelength, self.aperture_radius, self.tail))
+        return eqx.tree_at(lambda p: (p.resolution, p.ref_nodes), base, (res, nodes))
 
     def scaled(self, factor) -> CWProbe:
         """Wavelength, aperture radius and resolution divided by `factor` (model scale
