@@ -1,5 +1,6 @@
 """Probe volumes: weightings, quadrature, symmetry, truncation, scaling, retracing."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -350,21 +351,16 @@ def test_simulate_chooses_nodes_for_the_field(probe):
     assert np.max(np.abs(np.asarray(coarse.los[:, 4]) - expected)) > 0.02
     before = _simulate_jit._cache_size()
     lj.simulate(field, scan, mount, heights, probe=probe)
-    lj.simulate(eqx_tree_k(field, np.pi / 3.0), scan, mount, heights, probe=probe)
+    lj.simulate(eqx.tree_at(lambda f: f.k, field, jnp.asarray(np.pi / 3.0)), scan, mount, heights,
+                probe=probe)
     assert _simulate_jit._cache_size() == before
-
-
-def eqx_tree_k(field, k):
-    import equinox as eqx
-
-    return eqx.tree_at(lambda f: f.k, field, jnp.asarray(k))
 
 
 def test_cw_nodes_are_differentiable_and_float32_safe():
     probe = CW.with_nodes(41, resolution=3.0)
 
     def second_moment(lam, r):
-        p = eqx_tree_wavelength(probe, lam)
+        p = eqx.tree_at(lambda q: q.wavelength, probe, lam)
         o, w = p.nodes(r)
         return jnp.sum(w * o**2) / jnp.sum(w)
 
@@ -381,12 +377,6 @@ def test_cw_nodes_are_differentiable_and_float32_safe():
     assert o32.dtype == jnp.float32 and np.all(np.isfinite(o32)) and np.all(np.isfinite(w32))
     np.testing.assert_allclose(o32, o64, rtol=2e-5, atol=1e-5)
     np.testing.assert_allclose(w32, w64, rtol=2e-5, atol=1e-8)
-
-
-def eqx_tree_wavelength(probe, lam):
-    import equinox as eqx
-
-    return eqx.tree_at(lambda p: p.wavelength, probe, lam)
 
 
 def test_scan_bounds_hold_the_nodes_simulate_chooses():
