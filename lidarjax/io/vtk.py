@@ -98,7 +98,7 @@ class VTKField(OpenFOAMField):
 
 def _pick(data: dict, what: str, path: Path) -> np.ndarray | None:
     for key, arr in data.items():
-        if str(key).lower() in _NAMES:
+        if arr is not None and str(key).lower() in _NAMES:
             a = np.asarray(arr, np.float64)
             if a.ndim == 2 and a.shape[1] >= 3:
                 return a[:, :3]
@@ -158,37 +158,91 @@ def _cell_faces(mesh, path: Path):
     return pad, np.concatenate(cell_ids), np.concatenate(sizes), n_cells, kept_blocks
 
 
+def _unique_rows(key: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Group equal rows of `key` (`(n, k)` int64, each row sorted, padding above every
+    label): `(order, group)`, `order` sorting the rows lexicographically (stable, so
+    `np.unique(key, axis=0)`'s order) and `group[i]` the unique-row number of row
+    `order[i]`."""
+    n, width = key.shape
+    if n == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    base = np.int64(n_points) + 1  # labels 0..n_points-1, padding mapped to n_points
+    cols = np.minimum(key, base - 1)
+    # pack as many columns per int64 as fit (lexicographic order is kept)
+    per = max(1, int(np.floor(62 * np.log(2) / np.log(float(base)))))
+    packed = []
+    for j in range(0, width, per):
+        k = np.zeros(n, np.int64)
+        for c in range(j, min(j + per, width)):
+            k = k * base + cols[:, c]
+        packed.append(k)
+    order = packed[0].argsort(kind="stable") if len(packed) == 1 else np.lexsort(packed[::-1])
+    srt = [k[order] for k in packed]
+    new = np.zeros(n, bool)
+    new[0] = True
+    for k in srt:
+        new[1:] |= k[1:] != k[:-1]
+    return order, np.cumsum(new) - 1
+
+
+def _vertex_sum(points: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """Sum of the points of each padded row of vertex ids (`rows` `(n, k)`, the first
+    `sizes[i]` entries valid), added column by column (in vertex order)."""
+    acc = points[rows[:, 0]]
+    for j in range(1, rows.shape[1]):
+        r = np.flatnonzero(sizes > j)
+        if r.size == rows.shape[0]:
+            acc += points[rows[:, j]]
+        elif r.size:
+            acc[r] += points[rows[r, j]]
+    return acc
+
+
 def _poly_mesh(points: np.ndarray, pad, cell_of, sizes, n_cells, path: Path) -> PolyMesh:
-    key = np.sort(np.where(pad < 0, np.iinfo(np.int64).max, pad), axis=1)
-    _, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True,
-                                          return_counts=True)
-    inverse = inverse.reshape(-1)
+    """The face-based mesh of the cells' faces (`pad`: one padded row of vertex ids per face
+    of each cell, `cell_of` its cell): each face once, owned by the lower cell number and
+    oriented out of it, internal faces first (by owner), then the boundary faces."""
+    big = np.iinfo(np.int64).max
+    key = np.sort(np.where(pad < 0, big, pad), axis=1)
+    order, group = _unique_rows(key, points.shape[0])
+    n_faces = int(group[-1]) + 1 if group.size else 0
+    counts = np.bincount(group, minlength=n_faces)
     if np.any(counts > 2):
         raise ValueError(f"{os.fspath(path)}: {int((counts > 2).sum())} faces are shared by more "
                          "than two cells; the grid is not a valid volume mesh")
-    owner = np.full(counts.size, np.iinfo(np.int64).max)
-    np.minimum.at(owner, inverse, cell_of)
-    neighbour = np.full(counts.size, -1)
-    np.maximum.at(neighbour, inverse, cell_of)
+    starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
+    cell_sorted = cell_of[order]
+    owner = np.minimum.reduceat(cell_sorted, starts)
+    neighbour = np.maximum.reduceat(cell_sorted, starts)
     neighbour[counts == 1] = -1
-    # the owner's occurrence gives the vertex order; orient it out of the owner
-    occ = np.flatnonzero(cell_of == owner[inverse])
-    occ = occ[np.unique(inverse[occ], return_index=True)[1]]
+    # the owner's (first) occurrence gives the vertex order; orient it out of the owner
+    own_pos = np.flatnonzero(cell_sorted == owner[group])
+    first = np.r_[True, group[own_pos[1:]] != group[own_pos[:-1]]]
+    occ = order[own_pos[first]]
     verts, nv = pad[occ], sizes[occ]
-    centroid = np.zeros((n_cells, 3))
-    np.add.at(centroid, cell_of, np.where((pad >= 0)[..., None], points[np.maximum(pad, 0)], 0).sum(1)
-              / sizes[:, None])
+    # centroid of each cell: mean over its faces of their vertex means
+    face_mean = _vertex_sum(points, pad, sizes) / sizes[:, None]
+    centroid = np.stack([np.bincount(cell_of, weights=face_mean[:, a], minlength=n_cells)
+                         for a in range(3)], axis=1)
     centroid /= np.maximum(np.bincount(cell_of, minlength=n_cells), 1)[:, None]
-    valid = verts >= 0
-    p = points[np.maximum(verts, 0)]
-    fc = np.where(valid[..., None], p, 0).sum(1) / nv[:, None]
-    nxt = np.where(np.arange(verts.shape[1])[None, :] + 1 < nv[:, None],
-                   np.arange(verts.shape[1])[None, :] + 1, 0)
-    pn = np.take_along_axis(p, nxt[..., None], axis=1)
-    normal = np.where(valid[..., None], np.cross(p - fc[:, None], pn - fc[:, None]), 0).sum(1)
+    fc = _vertex_sum(points, verts, nv) / nv[:, None]
+    # sum over the face's edges of (p_j - fc) x (p_next - fc), column by column
+    normal = np.zeros((verts.shape[0], 3))
+    for j in range(verts.shape[1]):
+        rows = np.flatnonzero(nv > j)
+        nxt = np.where(j + 1 < nv[rows], verts[rows, min(j + 1, verts.shape[1] - 1)], verts[rows, 0])
+        c = fc[rows]
+        term = np.cross(points[verts[rows, j]] - c, points[nxt] - c)
+        if j == 0:
+            normal[rows] = term
+        else:
+            normal[rows] += term
     flip = np.einsum("ij,ij->i", normal, fc - centroid[owner]) < 0
-    for i in np.flatnonzero(flip):
-        verts[i, : nv[i]] = verts[i, : nv[i]][::-1]
+    if flip.any():  # reverse the first nv[i] labels of each flipped face
+        rows = np.flatnonzero(flip)
+        col = np.arange(verts.shape[1])[None, :]
+        rev = np.where(col < nv[rows, None], nv[rows, None] - 1 - col, col)
+        verts[rows] = np.take_along_axis(verts[rows], rev, axis=1)
     internal = neighbour >= 0
     order = np.concatenate([np.flatnonzero(internal)[np.argsort(owner[internal], kind="stable")],
                             np.flatnonzero(~internal)])
@@ -295,6 +349,48 @@ class _VtuReader:
         return {el.get("Name", ""): el for el in node.findall("DataArray")}
 
 
+def _is_velocity(name: str, el) -> bool:
+    """Whether a DataArray element may be the velocity (as `_pick` would take it)."""
+    return str(name).lower() in _NAMES and int(el.get("NumberOfComponents", "1")) >= 3
+
+
+def _polyhedron_faces(stream: np.ndarray, starts: np.ndarray, cells: np.ndarray, path: Path
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The faces of VTK polyhedra from the `faces` stream (per cell: face count, then per
+    face its vertex count and vertex ids), walked for all cells at once, one face per step.
+
+    **Returns:** `(start, size, cell)` per face: position of its first vertex id in
+    `stream`, its vertex count and its cell (from `cells`), cell by cell, faces in stream
+    order."""
+    bad = ValueError(f"{os.fspath(path)}: the polyhedron face stream ('faces', 'faceoffsets') "
+                     "is inconsistent")
+    n_stream = stream.size
+    if starts.size and (starts.max() >= n_stream or starts.min() < 0):
+        raise bad
+    n_faces = stream[starts]
+    if n_faces.size and n_faces.min() < 1:
+        raise bad
+    pos = starts + 1
+    f_start, f_size, f_cell, f_k = [], [], [], []
+    live = np.arange(cells.size)
+    for k in range(int(n_faces.max()) if n_faces.size else 0):
+        live = live[n_faces[live] > k]
+        at = pos[live]
+        if at.max() >= n_stream:
+            raise bad
+        n = stream[at]
+        if n.min() < 3 or (at + n).max() >= n_stream:
+            raise bad
+        f_start.append(at + 1)
+        f_size.append(n)
+        f_cell.append(live)
+        f_k.append(np.full(live.size, k))
+        pos[live] = at + 1 + n
+    f_cell_i = np.concatenate(f_cell)
+    order = np.lexsort((np.concatenate(f_k), f_cell_i))
+    return np.concatenate(f_start)[order], np.concatenate(f_size)[order], cells[f_cell_i[order]]
+
+
 def _read_vtu(path: Path):
     r = _VtuReader(path)
     pts_el = r.arrays("Points")
@@ -328,14 +424,13 @@ def _read_vtu(path: Path):
         stream = r.array(cells["faces"]).astype(np.int64)
         foffs = r.array(cells["faceoffsets"]).astype(np.int64)
         fstarts = np.concatenate([[0], np.maximum.accumulate(np.maximum(foffs, 0))[:-1]])
-        for c in poly:
-            pos = fstarts[c]
-            for _ in range(int(stream[pos])):
-                n = int(stream[pos + 1])
-                face_parts.append(stream[pos + 2: pos + 2 + n][None, :])
-                cell_parts.append(np.array([c]))
-                size_parts.append(np.array([n]))
-                pos += 1 + n
+        f_start, f_size, f_cell = _polyhedron_faces(stream, fstarts[poly], poly, path)
+        width_p = int(f_size.max())
+        col = np.arange(width_p)
+        inside = col[None, :] < f_size[:, None]
+        face_parts.append(np.where(inside, stream[np.where(inside, f_start[:, None] + col, 0)], -1))
+        cell_parts.append(f_cell)
+        size_parts.append(f_size)
         keep[poly] = True
     if not keep.any():
         raise ValueError(f"{os.fspath(path)}: no volume cells (tetra, hexahedron, wedge, pyramid, "
@@ -343,12 +438,20 @@ def _read_vtu(path: Path):
     # number the kept (volume) cells 0..n-1
     new = np.cumsum(keep) - 1
     width = max(f.shape[1] for f in face_parts)
-    pad = np.concatenate([np.pad(f, ((0, 0), (0, width - f.shape[1])), constant_values=-1)
-                          for f in face_parts])
+    pad = np.full((sum(f.shape[0] for f in face_parts), width), -1, np.int64)
+    row = 0
+    for f in face_parts:
+        pad[row: row + f.shape[0], : f.shape[1]] = f
+        row += f.shape[0]
+    if pad.size and (pad.max() >= points.shape[0] or pad.min() < -1):
+        raise ValueError(f"{os.fspath(path)}: cell connectivity refers to points beyond the "
+                         f"{points.shape[0]} points of the file")
     cell_of = new[np.concatenate(cell_parts)]
     sizes = np.concatenate(size_parts)
-    pdata = {k: r.array(v) for k, v in r.arrays("PointData").items()}
-    cdata = {k: r.array(v)[keep] for k, v in r.arrays("CellData").items()}
+    # decode only the velocity candidates (the other arrays are listed by name)
+    pdata = {k: r.array(v) if _is_velocity(k, v) else None for k, v in r.arrays("PointData").items()}
+    cdata = {k: r.array(v)[keep] if _is_velocity(k, v) else None
+             for k, v in r.arrays("CellData").items()}
     return points, pad, cell_of, sizes, int(keep.sum()), pdata, cdata
 
 
