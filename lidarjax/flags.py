@@ -64,6 +64,9 @@ class InverseFlag(enum.IntFlag):
     #: The input is physically impossible (a negative reported speed): NaN, never
     #: reinterpreted (a negative speed is not read as the opposite direction).
     IMPOSSIBLE_INPUT = 32
+    #: `lidarjax.invert_joint`: the profile parameter lies outside the table's range; the
+    #: response was continued linearly in the parameter (the result is kept, but doubtful).
+    PARAMETER_EXTRAPOLATED = 64
 
 
 class RecordFlag(enum.IntFlag):

@@ -51,9 +51,17 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from ._backend import CPU_BATCH, bucket, default_batch, positive_size
 from ._precision import HIGHEST, default_float, is_concrete
 from .flags import InverseFlag
-from .response import PeriodicSpline, ResponseTable, locate
+from .response import (
+    AbstractProfile,
+    PeriodicSpline,
+    ProfileTable,
+    ResponseTable,
+    locate,
+    parameter_weights,
+)
 
-__all__ = ["Inversion", "invert", "invert_reconstructed", "default_solver"]
+__all__ = ["Inversion", "invert", "invert_reconstructed", "default_solver", "JointInversion",
+           "invert_joint", "invert_joint_reconstructed"]
 
 #: Problems (record-heights) per vmapped batch on a CPU (rounded down to whole records), the
 #: default there. Small batches waste little on their slowest member; measured best on CPU
@@ -560,4 +568,417 @@ def invert_reconstructed(
         fname="invert_reconstructed", unit="(..., h, 2)",
     )
     flag = jnp.where(impossible, int(InverseFlag.IMPOSSIBLE_INPUT), 0).astype(out.flags.dtype)
+    return eqx.tree_at(lambda r: r.flags, out, out.flags | flag)
+
+
+# ------------------------------------------------------------------------------------------
+# Joint inversion across heights (tables over direction x a profile parameter)
+
+
+class JointInversion(eqx.Module):
+    """Results of `invert_joint`: one solution per record, shaped ``(...)`` (the records'
+    leading axes), plus what it implies at each height ``(..., h)``.
+
+    - `speed`: free-stream horizontal speed at the profile's reference height, m/s.
+    - `direction`: free-stream meteorological direction (from, degrees clockwise from north,
+      in ``[0, 360)``), the same at every height.
+    - `parameter`: the profile parameter (the table's `name`, in its unit; e.g. the shear
+      exponent alpha).
+    - `speed_std`, `direction_std`, `parameter_std`: one-sigma uncertainties (m/s, degrees,
+      parameter unit) from the Jacobian at the solution, ``sigma**2 (J^T W J)^-1``; with the
+      noise estimated from ``dof = n_beams - 3`` spare beams use Student's t for `dof`.
+    - `correlation`: ``(..., 3, 3)`` correlation matrix of (speed, direction, parameter).
+    - `height_speed`, `height_speed_std`: ``(..., h)`` the free-stream speed at each of the
+      table's heights, ``speed * profile(z_h, parameter)``, and its one-sigma uncertainty
+      (delta method through the covariance).
+    - `converged`, `residual_rms` (m/s), `noise` (m/s, given or estimated), `n_beams`
+      (usable beams over all heights), `num_steps`, `result` (`optimistix.RESULTS`),
+      `flags` (`InverseFlag` bits; `PARAMETER_EXTRAPOLATED` when the parameter lies outside
+      the table's range).
+    """
+
+    speed: Float[Array, ...]
+    direction: Float[Array, ...]
+    parameter: Float[Array, ...]
+    speed_std: Float[Array, ...]
+    direction_std: Float[Array, ...]
+    parameter_std: Float[Array, ...]
+    correlation: Float[Array, "... 3 3"]
+    height_speed: Float[Array, "... h"]
+    height_speed_std: Float[Array, "... h"]
+    converged: Bool[Array, ...]
+    residual_rms: Float[Array, ...]
+    noise: Float[Array, ...]
+    n_beams: Int[Array, ...]
+    num_steps: Int[Array, ...]
+    result: optx.RESULTS
+    flags: Int[Array, ...]
+
+    @property
+    def dof(self) -> Int[Array, ...]:
+        """Spare beams behind the noise estimate: ``n_beams - 3``."""
+        return self.n_beams - 3
+
+
+class _JointContext(eqx.Module):
+    """What the per-record model needs: the direction spline over ``(p, h, b)``, the
+    parameter interpolation, the heights and the profile."""
+
+    geom: tuple
+    coefficients: Array  # (4, s, p, h, b)
+    pknots: Array
+    pwidths: Array
+    pbasis: Array
+    heights: Array
+    profile: AbstractProfile
+    centre: Array
+    span: Array
+
+
+def _joint_shape(ctx: _JointContext, d, a):
+    """``profile(z_h, a) * R_hb(d, a)`` ``(h, b)``: LOS per unit reference speed."""
+    k, t = locate(*ctx.geom, d)
+    c = ctx.coefficients[:, k]  # (4, p, h, b)
+    v = c[0] + t * (c[1] + t * (c[2] + t * c[3]))
+    w = parameter_weights(ctx.pknots, ctx.pwidths, ctx.pbasis, a, extrapolate=True)
+    r = jnp.einsum("p,phb->hb", w, v, precision=HIGHEST)
+    return ctx.profile(ctx.heights, a)[:, None] * r
+
+
+def _joint_residuals(y, args):
+    los, sw, ctx = args
+    speed, d, _ = _polar(y[:2])
+    a = ctx.centre + y[2] * ctx.span
+    return (sw * (los - speed * _joint_shape(ctx, d, a))).reshape(-1)
+
+
+def _joint_one(los, w, noise, k, j, u0, scale, ctx, knots, cfg):
+    """One record: `los`, `w` ``(h, b)`` cleaned and in units of `scale`; `noise` scalar
+    (m/s, NaN: estimate); start: direction knot `k`, parameter index `j`, speed `u0`."""
+    solver, max_steps, min_beams = cfg
+    dtype = los.dtype
+    usable = w > 0
+    n_beams = jnp.sum(usable.astype(jnp.int32))
+    sw = jnp.sqrt(jnp.where(usable, w, 1.0)) * usable
+    d0 = knots[k]
+    a0 = ctx.pknots[j]
+    unit = jnp.stack([-jnp.sin(jnp.deg2rad(d0)), -jnp.cos(jnp.deg2rad(d0))])
+    trivial = (u0 <= 0) | (n_beams < min_beams)
+    args = (jnp.where(trivial, _joint_shape(ctx, d0, a0), los),
+            jnp.where(trivial, jnp.ones_like(sw), sw), ctx)
+    s0 = (a0 - ctx.centre) / ctx.span
+    y0 = jax.lax.stop_gradient(jnp.concatenate([jnp.where(trivial, unit, u0 * unit), s0[None]]))
+    sol = optx.least_squares(_joint_residuals, solver, y0, args, max_steps=max_steps,
+                             throw=False)
+    y = sol.value
+    speed, d, calm = _polar(y[:2])
+    d = jnp.where(calm, d0, d)
+    a = ctx.centre + y[2] * ctx.span
+
+    def model(theta):
+        return (theta[0] * _joint_shape(ctx, theta[1], theta[2])).reshape(-1)
+
+    theta = jnp.stack([speed, d, a])
+    jac = jax.jacfwd(model)(theta)  # (n, 3); direction per degree
+    wf = w.reshape(-1)
+    resid = los.reshape(-1) - model(theta)
+    wrss = jnp.sum(wf * resid * resid)
+    wsum = jnp.sum(wf)
+    residual_rms = jnp.where(wsum > 0, jnp.sqrt(wrss / jnp.where(wsum > 0, wsum, 1.0)), jnp.nan)
+    dof = n_beams - 3
+    sigma2_est = jnp.where(dof > 0, wrss / jnp.maximum(dof, 1), jnp.nan)
+    sigma2 = jnp.where(jnp.isnan(noise), sigma2_est, (noise / scale) ** 2)
+    m = jnp.einsum("n,ni,nj->ij", wf, jac, jac, precision=HIGHEST)
+    diag = jnp.sqrt(jnp.maximum(jnp.diagonal(m), 0.0))
+    pos = diag > 0
+    dn = jnp.where(pos, diag, 1.0)
+    mn = m / (dn[:, None] * dn[None, :])
+    eig = jnp.linalg.eigvalsh(jnp.where(jnp.all(pos), mn, jnp.eye(3, dtype=dtype)))
+    rcond = jnp.sqrt(jnp.finfo(dtype).eps)
+    well_posed = jnp.all(pos) & (eig[0] > rcond * eig[-1])
+    inv = jnp.linalg.inv(jnp.where(well_posed, mn, jnp.eye(3, dtype=dtype)))
+    cov = sigma2 * inv / (dn[:, None] * dn[None, :])
+    std = jnp.sqrt(jnp.maximum(jnp.diagonal(cov), 0.0))
+    sd = jnp.where(std > 0, std, 1.0)
+    corr = cov / (sd[:, None] * sd[None, :])
+    # the speed at each height and its uncertainty
+    f, df = jax.jvp(lambda x: ctx.profile(ctx.heights, x), (a,), (jnp.ones_like(a),))
+    g = jnp.stack([f, jnp.zeros_like(f), speed * df], axis=-1)  # (h, 3)
+    hs_var = jnp.einsum("hi,ij,hj->h", g, cov, g, precision=HIGHEST)
+
+    ok_solver = sol.result == optx.RESULTS.successful
+    finite = jnp.all(jnp.isfinite(y))
+    enough = n_beams >= min_beams
+    converged = ok_solver & finite & enough & (well_posed | calm) & ~(u0 <= 0)
+    calm = calm | (u0 <= 0)
+    outside = (a < ctx.pknots[0] - 1e-9 * ctx.span) | (a > ctx.pknots[-1] + 1e-9 * ctx.span)
+    flags = (
+        jnp.where(enough, 0, int(InverseFlag.TOO_FEW_BEAMS))
+        | jnp.where((ok_solver & finite) | ~enough | calm, 0, int(InverseFlag.NOT_CONVERGED))
+        | jnp.where(well_posed | ~enough | calm, 0, int(InverseFlag.ILL_CONDITIONED))
+        | jnp.where(enough & calm, int(InverseFlag.CALM), 0)
+        | jnp.where(converged & jnp.isnan(sigma2), int(InverseFlag.NO_NOISE_ESTIMATE), 0)
+        | jnp.where(converged & outside, int(InverseFlag.PARAMETER_EXTRAPOLATED), 0)
+    )
+    nan = jnp.asarray(jnp.nan, dtype)
+    direction = jnp.mod(d, 360.0)
+    direction = jnp.where(direction >= 360.0, direction - 360.0, direction)
+    return dict(
+        speed=jnp.where(converged, speed * scale, nan),
+        direction=jnp.where(converged, direction, nan),
+        parameter=jnp.where(converged, a, nan),
+        speed_std=jnp.where(converged, std[0] * scale, nan),
+        direction_std=jnp.where(converged, std[1], nan),
+        parameter_std=jnp.where(converged, std[2], nan),
+        correlation=jnp.where(converged, corr, nan),
+        height_speed=jnp.where(converged, speed * f * scale, nan),
+        height_speed_std=jnp.where(converged, jnp.sqrt(jnp.maximum(hs_var, 0.0)) * scale, nan),
+        converged=converged,
+        residual_rms=residual_rms * scale,
+        noise=jnp.sqrt(sigma2) * scale,
+        n_beams=n_beams,
+        num_steps=sol.stats["num_steps"].astype(jnp.int32),
+        result=sol.result,
+        flags=flags.astype(jnp.int32),
+    )
+
+
+def _joint_batch(los, w, noise, values, knots, ctx, cfg):
+    """Records ``(r, h, b)``: dense start over directions x parameters, then one solve per
+    record. `values` ``(s, p, h, b)``: tabulated LOS per unit reference speed."""
+    r = los.shape[0]
+    usable = (w > 0) & jnp.isfinite(los)
+    w = jnp.where(usable, w, 0.0)
+    los = jnp.where(usable, los, 0.0)
+    # given noise per height: weights become inverse variances, the noise level 1 m/s
+    given = ~jnp.isnan(noise)
+    w = jnp.where(given[..., None], w / jnp.where(given, noise, 1.0)[..., None] ** 2, w)
+    noise_r = jnp.where(jnp.any(given, axis=-1), 1.0, jnp.nan).astype(los.dtype)
+    peak = jnp.max(jnp.abs(los), axis=(-2, -1))
+    peak = jnp.where(peak > 0, peak, 1.0)
+    wsum = jnp.sum(w, axis=(-2, -1))
+    x = los / peak[:, None, None]
+    scale = peak * jnp.sqrt(jnp.sum(w * x * x, axis=(-2, -1)) / jnp.where(wsum > 0, wsum, 1.0))
+    scale = jax.lax.stop_gradient(jnp.where(scale > 0, scale, 1.0))
+    los = los / scale[:, None, None]
+    s, p = values.shape[:2]
+    a = jnp.einsum("rhb,sphb->rsp", w * los, values, precision=HIGHEST).reshape(r, s * p)
+    c = jnp.einsum("rhb,sphb->rsp", w, values * values, precision=HIGHEST).reshape(r, s * p)
+    uk = jnp.where((a > 0) & (c > 0), a / jnp.where(c > 0, c, 1.0), 0.0)
+    best = jnp.argmax(a * uk, axis=-1)
+    u0 = jnp.take_along_axis(uk, best[:, None], axis=-1)[:, 0]
+    k, j = best // p, best % p
+
+    def one(los_i, w_i, noise_i, k_i, j_i, u0_i, scale_i):
+        return _joint_one(los_i, w_i, noise_i, k_i, j_i, u0_i, scale_i, ctx, knots, cfg)
+
+    return jax.vmap(one)(los, w, noise_r, k, j, u0, scale)
+
+
+@eqx.filter_jit
+def _joint_core(ctx, values, knots, valid, los, weights, noise, cfg, per_batch, n_real):
+    n, h, b = los.shape
+    w_r = weights * valid
+    values = jnp.where(valid, values, 0.0)
+
+    def run(x):
+        return _joint_batch(*x, values, knots, ctx, cfg)
+
+    if per_batch is None or n <= per_batch:
+        out = run((los, w_r, noise))
+    else:
+        pad = (-n) % per_batch
+        xs = (
+            jnp.concatenate([los, jnp.zeros((pad, h, b), los.dtype)]),
+            jnp.concatenate([w_r, jnp.zeros((pad, h, b), w_r.dtype)]),
+            jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)]),
+        )
+        xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
+        shapes = jax.eval_shape(run, jax.tree_util.tree_map(lambda x: x[0], xs))
+        skipped = lambda x: jax.tree_util.tree_map(  # noqa: E731
+            lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+
+        def one_batch(args):
+            k, x = args
+            return jax.lax.cond(k * per_batch < n_real, run, skipped, x)
+
+        out = jax.lax.map(one_batch, (jnp.arange(xs[0].shape[0]), xs))
+        out = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:])[:n], out)
+    return JointInversion(**out)
+
+
+def _joint_run(table, spline, per_profile, los, weights, noise, *, profile, min_beams,
+               max_steps, solver, batch_size, fname, valid):
+    """Shared by `invert_joint` and `invert_joint_reconstructed`: `spline` over
+    ``(p, h, k)``, `per_profile` ``(p, s, h, k)`` tabulated values per unit local speed."""
+    if table.heights is None:
+        raise ValueError(f"{fname}: the table has no heights; the profile needs them (build "
+                         "it with heights, e.g. lidarjax table).")
+    profile = table.profile if profile is None else profile
+    if not isinstance(profile, AbstractProfile):
+        raise ValueError(f"{fname}: `profile` must be a lidarjax.AbstractProfile "
+                         "(PowerLawProfile(reference_height), UniformProfile()) or None.")
+    los = jnp.asarray(los)
+    dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else table.dtype
+    los = los.astype(dtype)
+    shape = los.shape
+    if weights is None:
+        weights = jnp.ones(shape, dtype)
+    else:
+        weights = _broadcast_input("weights", weights, shape, dtype, "los shape")
+        if is_concrete(weights):
+            wn = np.asarray(weights)
+            if np.any(wn < 0) or np.any(np.isinf(wn)):
+                raise ValueError(f"{fname}: `weights` must be finite and nonnegative (relative "
+                                 "inverse variances; NaN or 0 drops a beam).")
+        weights = jnp.where(jnp.isnan(weights), 0.0, weights)
+    if noise is None:
+        noise = jnp.full(shape[:-1], jnp.nan, dtype)
+    else:
+        noise = _broadcast_input("noise", noise, shape[:-1], dtype, "(..., h)")
+        if is_concrete(noise) and np.any(~(np.asarray(noise) > 0)):
+            raise ValueError(f"{fname}: `noise` must be positive (m/s), or None to estimate it.")
+    if int(min_beams) < 3:
+        raise ValueError(f"{fname}: `min_beams` must be at least 3 (three unknowns), got "
+                         f"{min_beams}.")
+    if int(max_steps) < 1:
+        raise ValueError(f"{fname}: `max_steps` must be positive, got {max_steps}.")
+    if solver is None:
+        solver = default_solver(dtype)
+    heights = jnp.asarray(table.heights, dtype)
+    pk = jnp.asarray(table.parameters, dtype)
+    factors = profile(heights, pk)  # (p, h)
+    values = jnp.swapaxes(per_profile, 0, 1) * factors[None, :, :, None]  # (s, p, h, k)
+    ctx = _JointContext(
+        geom=(spline.start, spline.offsets, spline.widths, spline.uniform),
+        coefficients=spline.coefficients, pknots=pk,
+        pwidths=jnp.asarray(table.parameter_widths, dtype),
+        pbasis=jnp.asarray(table.parameter_basis, dtype), heights=heights, profile=profile,
+        centre=0.5 * (pk[0] + pk[-1]), span=0.5 * (pk[-1] - pk[0]))
+    ctx, values, knots = _cast_floats((ctx, values, jnp.asarray(table.directions)), dtype)
+    cfg = (solver, int(max_steps), int(min_beams))
+    *batch, h, b = shape
+    n = int(np.prod(batch, dtype=np.int64))
+    per_batch, n_pad = _batching(batch_size, n, h, b, values.shape[0] * values.shape[1],
+                                 np.dtype(dtype).itemsize, fname)
+    if not is_concrete(los, weights, noise):
+        n_pad = n
+    los, weights, noise = _records(los, weights, noise, n_pad)
+    out = _joint_core(ctx, values, knots, valid, los, weights, noise, cfg, per_batch,
+                      jnp.asarray(n, jnp.int32))
+    return _unpad(out, n, tuple(batch))
+
+
+def _need_profile_table(table, fname):
+    if isinstance(table, ResponseTable):
+        raise ValueError(
+            f"{fname}: the table has no profile axis (a ResponseTable over directions only); "
+            "invert each height with lidarjax.invert, or build a ProfileTable (lidarjax table "
+            "--param NAME=V1,V2,...).")
+    if not isinstance(table, ProfileTable):
+        raise ValueError(f"{fname}: `table` must be a lidarjax.ProfileTable, got "
+                         f"{type(table).__name__}.")
+
+
+def invert_joint(
+    table: ProfileTable,
+    los: Float[ArrayLike, "... h b"],
+    *,
+    weights: Float[ArrayLike, "... h b"] | None = None,
+    noise: Float[ArrayLike, "... h"] | None = None,
+    profile: AbstractProfile | None = None,
+    min_beams: int = 4,
+    max_steps: int = 32,
+    solver: optx.AbstractLeastSquaresSolver | None = None,
+    batch_size: int | str | None = None,
+) -> JointInversion:
+    """Speed and direction at the reference height and the profile parameter, per record,
+    from the LOS of all heights in one least-squares problem.
+
+    The model of beam ``b`` at height ``z_h`` is
+    ``los_hb = U * profile(z_h, a) * R_hb(d, a)``: the reference-height free-stream speed
+    ``U`` (m/s), the profile (`table.profile`, or `profile`: the static modelling choice,
+    e.g. `PowerLawProfile` ``(z / z_ref) ** alpha``), and the table's response per unit local
+    free-stream speed at direction ``d`` and parameter ``a`` (`ProfileTable.response_at`,
+    continued linearly outside the parameter range with the flag
+    `InverseFlag.PARAMETER_EXTRAPOLATED`). Unknowns ``(u, v, a)``, Gauss--Newton from the
+    best tabulated (direction, parameter) with its closed-form speed, as `invert`.
+
+    **Arguments:**
+
+    - `table`: a `lidarjax.ProfileTable` with heights (a `ResponseTable` is refused: use
+      `invert` per height).
+    - `los`: ``(..., h, b)`` LOS, m/s, positive away from the lidar; NaN marks a missing beam.
+    - `weights`: optional ``(..., h, b)`` relative inverse variances (0 or NaN drops a beam).
+    - `noise`: optional ``(..., h)`` LOS noise (m/s) of a beam of unit weight per height; if
+      None one level per record is estimated from the residuals (``n_beams - 3`` spare).
+    - `profile`: replaces the table's profile (None: the table's).
+    - `min_beams`: fewest usable beams over all heights (default 4: one spare).
+    - `max_steps`, `solver`, `batch_size`: as for `invert` (`batch_size` counts
+      record-heights, rounded down to whole records).
+
+    **Returns:** a `JointInversion` shaped ``(...)`` (``(..., h)`` for the per-height
+    speeds), in the dtype of `los`. Bad records come back NaN with ``converged=False`` and a
+    reason in `flags`; the others are unaffected. Raises `ValueError` before compiling for
+    a table without a profile axis or heights, shapes that do not match, negative weights,
+    non-positive noise.
+    """
+    _need_profile_table(table, "invert_joint")
+    los_shape = jnp.shape(los)
+    want = (table.n_heights, table.n_beams)
+    if len(los_shape) < 2 or tuple(los_shape[-2:]) != want:
+        raise ValueError(f"invert_joint: `los` must be shaped (..., h, b) with (h, b) = {want} "
+                         f"as in the table; got {tuple(los_shape)}.")
+    return _joint_run(table, table.response_spline, table.response, los, weights, noise,
+                      profile=profile, min_beams=min_beams, max_steps=max_steps, solver=solver,
+                      batch_size=batch_size, fname="invert_joint", valid=table.valid)
+
+
+def invert_joint_reconstructed(
+    table: ProfileTable,
+    speed: Float[ArrayLike, "... h"],
+    direction: Float[ArrayLike, "... h"],
+    *,
+    noise: Float[ArrayLike, "... h"] | None = None,
+    profile: AbstractProfile | None = None,
+    max_steps: int = 32,
+    solver: optx.AbstractLeastSquaresSolver | None = None,
+    batch_size: int | str | None = None,
+) -> JointInversion:
+    """`invert_joint` from the instrument's reported speed and direction per height
+    (``.sta``): the reported horizontal vector of each height is modelled as
+    ``U * profile(z_h, a) * Rrec_h(d, a)`` with the tables' `reconstructed` response (the
+    two components as two "beams"). `speed` (m/s, negative: NaN flagged
+    `IMPOSSIBLE_INPUT`), `direction` (degrees) ``(..., h)``; `noise` per component (m/s);
+    other arguments as `invert_joint`. Needs two heights or more."""
+    _need_profile_table(table, "invert_joint_reconstructed")
+    if table.reconstructed_spline is None:
+        raise ValueError("invert_joint_reconstructed: the table has no `reconstructed` "
+                         "response; build it with ResponseTable.from_simulations.")
+    speed = jnp.asarray(speed)
+    direction = jnp.asarray(direction)
+    try:
+        shape = jnp.broadcast_shapes(speed.shape, direction.shape)
+    except ValueError:
+        raise ValueError(f"invert_joint_reconstructed: `speed` {speed.shape} and `direction` "
+                         f"{direction.shape} do not broadcast together.") from None
+    if len(shape) < 1 or shape[-1] != table.n_heights:
+        raise ValueError(f"invert_joint_reconstructed: `speed` and `direction` must be shaped "
+                         f"(..., h) with h = {table.n_heights}; got {shape}.")
+    dtype = speed.dtype if jnp.issubdtype(speed.dtype, jnp.floating) else table.dtype
+    speed = jnp.broadcast_to(speed, shape).astype(dtype)
+    direction = jnp.broadcast_to(direction, shape).astype(dtype)
+    calm = speed == 0
+    impossible = speed < 0
+    rad = jnp.deg2rad(jnp.where(calm, 0.0, direction))
+    uv = jnp.stack([-speed * jnp.sin(rad), -speed * jnp.cos(rad)], axis=-1)
+    uv = jnp.where(impossible[..., None], jnp.nan, uv)
+    sp = table.reconstructed_spline
+    sub = PeriodicSpline(sp.start, sp.offsets, sp.widths, sp.coefficients[..., :2], sp.uniform)
+    valid = jnp.ones((table.n_heights, 2), bool)
+    out = _joint_run(table, sub, table.reconstructed[..., :2], uv, None, noise,
+                     profile=profile, min_beams=3, max_steps=max_steps, solver=solver,
+                     batch_size=batch_size, fname="invert_joint_reconstructed", valid=valid)
+    bad = jnp.any(impossible, axis=-1)
+    flag = jnp.where(bad, int(InverseFlag.IMPOSSIBLE_INPUT), 0).astype(out.flags.dtype)
     return eqx.tree_at(lambda r: r.flags, out, out.flags | flag)

@@ -25,6 +25,7 @@ interval, evaluate a cubic), differentiable in the direction and in the tabulate
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
@@ -45,7 +46,8 @@ from .mount import Mount
 from .probe import AbstractProbe, CWProbe, PointProbe, PulsedProbe
 from .scan import Scan
 
-__all__ = ["PeriodicSpline", "ResponseTable", "Instrument"]
+__all__ = ["PeriodicSpline", "ResponseTable", "Instrument", "ProfileTable", "AbstractProfile",
+           "PowerLawProfile", "UniformProfile", "profile_from_metadata", "parameter_weights"]
 
 
 def scan_name(scan: Scan) -> str:
@@ -612,3 +614,343 @@ class ResponseTable(eqx.Module):
             instrument=instrument if instrument is not None or scan is None
             else Instrument.of(scan, mount, heights[0], probe),
         )
+
+
+# ------------------------------------------------------------------------------------------
+# Tables over direction x one inflow-profile parameter
+
+
+class AbstractProfile(eqx.Module):
+    """The free-stream speed profile a `ProfileTable` and `lidarjax.invert_joint` assume:
+    the free-stream horizontal speed at height ``z`` is ``U_ref * profile(z, a)``, with
+    ``U_ref`` the speed at the reference height and ``a`` the table's profile parameter.
+
+    Subclasses implement ``__call__(heights, parameter)``: `heights` ``(h,)`` m above the
+    lidar, `parameter` ``(...)`` (the table's parameter, in its own unit) to a factor
+    ``(..., h)``, differentiable in both; and `metadata()` (what a table file stores).
+    The choice of profile is static (it is the model); its numbers stay dynamic.
+    """
+
+    @abc.abstractmethod
+    def __call__(self, heights: Float[ArrayLike, " h"],
+                 parameter: Float[ArrayLike, ...]) -> Float[Array, "... h"]:
+        raise NotImplementedError
+
+    @abc.abstractmethod
+    def metadata(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+
+class PowerLawProfile(AbstractProfile):
+    """Power-law shear: ``profile(z, alpha) = (z / reference_height) ** alpha``, the
+    parameter being the shear exponent (dimensionless). `reference_height` in m above the
+    lidar, positive: the height whose free-stream speed `invert_joint` reports."""
+
+    reference_height: Float[Array, ""]
+
+    def __init__(self, reference_height: Float[ArrayLike, ""]):
+        if is_concrete(reference_height):
+            z = float(np.asarray(reference_height, np.float64))
+            if not (math.isfinite(z) and z > 0):
+                raise ValueError(f"PowerLawProfile: `reference_height` must be a positive "
+                                 f"height in m, got {reference_height!r}.")
+        self.reference_height = jnp.asarray(reference_height, default_float()) \
+            if not hasattr(reference_height, "dtype") else jnp.asarray(reference_height)
+
+    def __call__(self, heights, parameter):
+        heights = jnp.asarray(heights)
+        parameter = jnp.asarray(parameter)
+        ratio = heights / self.reference_height.astype(heights.dtype)
+        return ratio ** parameter[..., None]
+
+    def metadata(self) -> dict[str, Any]:
+        return {"kind": "power_law", "reference_height_m": _host_number(self.reference_height)}
+
+
+class UniformProfile(AbstractProfile):
+    """No profile: ``profile(z, a) = 1``. The parameter changes only the flow distortion
+    (a turbulence-intensity class, a stability class whose runs share one inflow profile)."""
+
+    def __call__(self, heights, parameter):
+        heights = jnp.asarray(heights)
+        parameter = jnp.asarray(parameter)
+        return jnp.ones(parameter.shape + heights.shape, heights.dtype)
+
+    def metadata(self) -> dict[str, Any]:
+        return {"kind": "uniform"}
+
+
+def profile_from_metadata(meta: Mapping[str, Any] | None) -> AbstractProfile:
+    """The profile a table file's ``profile`` metadata names (`AbstractProfile.metadata`);
+    `UniformProfile` for None. Raises `ValueError` for an unknown kind."""
+    if meta is None or meta.get("kind") == "uniform":
+        return UniformProfile()
+    if meta.get("kind") == "power_law":
+        return PowerLawProfile(float(meta["reference_height_m"]))
+    raise ValueError(f"unknown profile {meta!r}: expected kind 'power_law' (with "
+                     "'reference_height_m') or 'uniform'")
+
+
+def _natural_basis(p: np.ndarray) -> np.ndarray:
+    """``(4, P-1, P)``: the natural cubic spline through each unit vector of ``P`` values at
+    knots `p` (cardinal functions), as coefficients in ``t = (a - p_k) / (p_{k+1} - p_k)``.
+    Two knots give the straight line."""
+    n = p.size
+    eye = np.eye(n)
+    if n == 2:
+        c = np.zeros((4, 1, 2))
+        c[0, 0], c[1, 0] = eye[0], eye[1] - eye[0]
+        return c
+    cs = CubicSpline(p, eye, axis=0, bc_type="natural").c  # (4, P-1, P)
+    w = np.diff(p)[:, None]
+    return np.stack([cs[3], cs[2] * w, cs[1] * w**2, cs[0] * w**3])
+
+
+def parameter_weights(knots, widths, basis, parameter, *, extrapolate: bool = False):
+    """Weights ``(..., P)`` of the ``P`` tabulated values at `parameter` ``(...)``: a
+    natural cubic spline inside ``[knots[0], knots[-1]]`` (two continuous derivatives), its
+    linear continuation outside (still C2) with `extrapolate`, else NaN outside."""
+    n = knots.shape[0]
+    parameter = jnp.asarray(parameter, knots.dtype)
+    k = jnp.searchsorted(knots, parameter, side="right", method="compare_all") - 1
+    k = jnp.clip(k, 0, n - 2)
+    t = (parameter - knots[k]) / widths[k]
+    tc = jnp.clip(t, 0.0, 1.0)
+    c = basis[:, k]  # (4, ..., P)
+    tt = tc[..., None]
+    value = c[0] + tt * (c[1] + tt * (c[2] + tt * c[3]))
+    slope = c[1] + tt * (2.0 * c[2] + 3.0 * tt * c[3])
+    w = value + (t - tc)[..., None] * slope
+    if not extrapolate:
+        w = jnp.where(((t >= 0) & (t <= 1))[..., None], w, jnp.nan)
+    return w
+
+
+class ProfileTable(eqx.Module):
+    """A response table over inflow direction x one scalar describing the inflow profile
+    (a shear exponent, an Obukhov length, a turbulence-intensity class).
+
+    **Arguments:**
+
+    - `name`: the parameter's name, e.g. ``"alpha"`` (static metadata).
+    - `parameters`: ``(p,)`` the parameter values of the CFD runs, increasing, at least 2.
+    - `tables`: ``p`` one-parameter `ResponseTable`s, one per value, on the same directions,
+      heights and beams (same missing beams), responses per unit **local** free-stream
+      speed (see `per_reference_speed`).
+    - `profile`: the free-stream profile (`PowerLawProfile`, `UniformProfile` (default), or
+      any `AbstractProfile`): the free-stream speed at height ``z`` is
+      ``U_ref * profile(z, a)``.
+    - `per_reference_speed`: the tables' responses are per unit free-stream speed at the
+      reference height (what `from_simulations` gives for a sheared run whose ``u_ref`` is
+      the reference-height free stream): they are divided by ``profile(heights, a)`` here.
+      Needs the tables' `heights`.
+
+    Interpolation: periodic cubic spline in direction (as `ResponseTable`) and natural cubic
+    spline in the parameter (two continuous derivatives; two values give a straight line).
+    Dividing out the profile first keeps the parameter dependence weak (the distortion only),
+    so few runs interpolate well. Outside the parameter range `response_at` gives NaN unless
+    asked to extrapolate (linearly, as `invert_joint` does, with a flag).
+
+    Directions meteorological degrees (from, clockwise from north); north frame.
+    """
+
+    name: str = eqx.field(static=True)
+    parameters: Float[Array, " p"]
+    tables: tuple[ResponseTable, ...]
+    profile: AbstractProfile
+    parameter_widths: Float[Array, " p1"]
+    parameter_basis: Float[Array, "4 p1 p"]
+    response_spline: PeriodicSpline
+    reconstructed_spline: PeriodicSpline | None
+
+    def __init__(self, name: str, parameters: Float[ArrayLike, " p"],
+                 tables: Sequence[ResponseTable], *, profile: AbstractProfile | None = None,
+                 per_reference_speed: bool = False):
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ValueError(f"ProfileTable: `name` must be an identifier such as 'alpha', got "
+                             f"{name!r}.")
+        p = _host_float(parameters, "parameters").reshape(-1)
+        tables = tuple(tables)
+        if p.size < 2 or not np.all(np.isfinite(p)) or np.any(np.diff(p) <= 0):
+            raise ValueError(f"ProfileTable: `parameters` must be at least 2 finite increasing "
+                             f"values of {name}, got {p.tolist()}.")
+        if len(tables) != p.size or not all(isinstance(t, ResponseTable) for t in tables):
+            raise ValueError(f"ProfileTable: `tables` must be {p.size} ResponseTables, one per "
+                             f"value of {name}.")
+        profile = UniformProfile() if profile is None else profile
+        if not isinstance(profile, AbstractProfile):
+            raise ValueError("ProfileTable: `profile` must be a lidarjax.AbstractProfile "
+                             "(PowerLawProfile(reference_height) or UniformProfile()).")
+        t0 = tables[0]
+        for i, t in enumerate(tables[1:], 1):
+            if t.response.shape != t0.response.shape or not np.allclose(
+                    np.asarray(t.directions), np.asarray(t0.directions), atol=1e-6):
+                raise ValueError(
+                    f"ProfileTable: the table for {name} = {p[i]:g} has directions or shape "
+                    f"{t.response.shape} unlike the first {t0.response.shape}; every profile "
+                    "needs runs at the same directions, heights and beams.")
+            if not np.array_equal(np.asarray(t.valid), np.asarray(t0.valid)):
+                raise ValueError(f"ProfileTable: the table for {name} = {p[i]:g} misses other "
+                                 "beams than the first; drop those beams from every table.")
+            for attr in ("reconstructed", "point", "beam_velocity", "beam_vectors", "heights"):
+                if (getattr(t, attr) is None) != (getattr(t0, attr) is None):
+                    raise ValueError(f"ProfileTable: `{attr}` is in some tables and not in "
+                                     "others; build them alike.")
+        if per_reference_speed:
+            if t0.heights is None:
+                raise ValueError("ProfileTable: `per_reference_speed` needs the tables' heights.")
+            tables = tuple(_scaled_table(t, 1.0 / np.asarray(
+                profile(np.asarray(t0.heights, np.float64), float(v)), np.float64))
+                for t, v in zip(tables, p, strict=True))
+            t0 = tables[0]
+        dtype = t0.dtype
+        self.name = name
+        self.tables = tables
+        self.profile = profile
+        self.parameters = jnp.asarray(p, dtype)
+        self.parameter_widths = jnp.asarray(np.diff(p), dtype)
+        self.parameter_basis = jnp.asarray(_natural_basis(p), dtype)
+
+        def stacked(attr):
+            splines = [getattr(t, attr) for t in tables]
+            if splines[0] is None:
+                return None
+            c = jnp.stack([s.coefficients for s in splines], axis=2)  # (4, s, p, ...)
+            s0 = splines[0]
+            return PeriodicSpline(s0.start, s0.offsets, s0.widths, c, s0.uniform)
+
+        self.response_spline = stacked("response_spline")
+        self.reconstructed_spline = stacked("reconstructed_spline")
+
+    # ----------------------------------------------------------------------------------------
+    @property
+    def directions(self) -> Float[Array, " s"]:
+        """Tabulated directions (degrees, sorted in ``[0, 360)``)."""
+        return self.tables[0].directions
+
+    @property
+    def response(self) -> Float[Array, "p s h b"]:
+        """Tabulated responses per unit local free-stream speed, ``(p, s, h, b)``."""
+        return jnp.stack([t.response for t in self.tables])
+
+    @property
+    def reconstructed(self) -> Float[Array, "p s h 3"] | None:
+        """Tabulated reconstructed vectors per unit local speed, or None."""
+        if self.tables[0].reconstructed is None:
+            return None
+        return jnp.stack([t.reconstructed for t in self.tables])
+
+    @property
+    def valid(self) -> Bool[Array, "h b"]:
+        return self.tables[0].valid
+
+    @property
+    def heights(self) -> Float[Array, " h"] | None:
+        return self.tables[0].heights
+
+    @property
+    def beam_vectors(self) -> Float[Array, "b 3"] | None:
+        return self.tables[0].beam_vectors
+
+    @property
+    def instrument(self) -> Instrument | None:
+        return self.tables[0].instrument
+
+    @property
+    def n_parameters(self) -> int:
+        return self.parameters.shape[0]
+
+    @property
+    def n_directions(self) -> int:
+        return self.tables[0].n_directions
+
+    @property
+    def n_heights(self) -> int:
+        return self.tables[0].n_heights
+
+    @property
+    def n_beams(self) -> int:
+        return self.tables[0].n_beams
+
+    @property
+    def dtype(self):
+        return self.tables[0].dtype
+
+    def weights(self, parameter: Float[ArrayLike, ...], *,
+                extrapolate: bool = False) -> Float[Array, "... p"]:
+        """Interpolation weights ``(..., p)`` of the tabulated profiles at `parameter`."""
+        return parameter_weights(self.parameters, self.parameter_widths, self.parameter_basis,
+                                 parameter, extrapolate=extrapolate)
+
+    def response_at(self, direction: Float[ArrayLike, ...], parameter: Float[ArrayLike, ...],
+                    *, extrapolate: bool = False) -> Float[Array, "... h b"]:
+        """LOS per unit local free-stream speed ``(..., h, b)`` at meteorological `direction`
+        (degrees) and profile `parameter` (broadcast together); NaN for missing beams and,
+        unless `extrapolate`, outside the parameter range."""
+        direction, parameter = jnp.broadcast_arrays(jnp.asarray(direction, self.dtype),
+                                                    jnp.asarray(parameter, self.dtype))
+        v = self.response_spline(direction)  # (..., p, h, b)
+        w = self.weights(parameter, extrapolate=extrapolate)
+        out = jnp.einsum("...p,...phb->...hb", w, v, precision=jax.lax.Precision.HIGHEST)
+        return jnp.where(self.valid, out, jnp.nan)
+
+    def reconstructed_at(self, direction, parameter, *, extrapolate: bool = False):
+        """Reconstructed vector per unit local speed ``(..., h, 3)``, north frame."""
+        if self.reconstructed_spline is None:
+            raise ValueError("ProfileTable: its tables have no `reconstructed` response.")
+        direction, parameter = jnp.broadcast_arrays(jnp.asarray(direction, self.dtype),
+                                                    jnp.asarray(parameter, self.dtype))
+        v = self.reconstructed_spline(direction)
+        w = self.weights(parameter, extrapolate=extrapolate)
+        return jnp.einsum("...p,...phk->...hk", w, v, precision=jax.lax.Precision.HIGHEST)
+
+    def at(self, parameter: float) -> ResponseTable:
+        """The one-parameter `ResponseTable` at `parameter` (host number inside the range):
+        every tabulated array interpolated in the parameter (exact for the splines, which are
+        linear in the tabulated values). For `lidarjax.invert` at a known profile."""
+        a = float(parameter)
+        lo, hi = float(self.parameters[0]), float(self.parameters[-1])
+        if not lo <= a <= hi:
+            raise ValueError(f"ProfileTable.at: {self.name} = {a:g} is outside the table's "
+                             f"range [{lo:g}, {hi:g}].")
+        w = np.asarray(self.weights(jnp.asarray(a, self.dtype)), np.float64)
+        return _combined(self.tables, w)
+
+
+def _scaled_table(t: ResponseTable, factor: np.ndarray) -> ResponseTable:
+    """`t` with every per-height array multiplied by `factor` ``(h,)``."""
+    f = np.asarray(factor, np.float64)
+
+    def sc(a, nd):
+        if a is None:
+            return None
+        a = np.asarray(a, np.float64)
+        return (a * f.reshape((1, -1) + (1,) * (nd - 2))).astype(np.asarray(t.response).dtype)
+
+    return ResponseTable(np.asarray(t.directions), sc(t.response, 3),
+                         reconstructed=sc(t.reconstructed, 3), point=sc(t.point, 3),
+                         beam_velocity=sc(t.beam_velocity, 4),
+                         beam_vectors=None if t.beam_vectors is None else np.asarray(
+                             t.beam_vectors),
+                         heights=None if t.heights is None else np.asarray(t.heights),
+                         instrument=t.instrument)
+
+
+def _combined(tables: Sequence[ResponseTable], w: np.ndarray) -> ResponseTable:
+    """The table whose arrays are ``sum_k w_k tables[k].array``."""
+    t0 = tables[0]
+    dtype = np.asarray(t0.response).dtype
+
+    def mix(attr):
+        if getattr(t0, attr) is None:
+            return None
+        return sum(wk * np.asarray(getattr(t, attr), np.float64)
+                   for wk, t in zip(w, tables, strict=True)).astype(dtype)
+
+    return ResponseTable(np.asarray(t0.directions), mix("response"),
+                         reconstructed=mix("reconstructed"), point=mix("point"),
+                         beam_velocity=mix("beam_velocity"),
+                         beam_vectors=None if t0.beam_vectors is None else np.asarray(
+                             t0.beam_vectors),
+                         heights=None if t0.heights is None else np.asarray(t0.heights),
+                         instrument=t0.instrument)
