@@ -9,10 +9,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+import jax.numpy as jnp
+
+from ..forward import probe_for_field
 from ..io import read_settings
 from ..io.fields import check_field_file, load_field
+from ..probe import PulsedProbe
+from ..workflows.monitor_points import monitor_points
 from ..workflows.seed_results import explain_nans, seed_result_files, write_seed_results
-from ..workflows.seed_tables import simulate_settings, table_region
+from ..workflows.seed_tables import settings_mount, simulate_settings, table_region
 from ._common import (
     add_run_arguments,
     add_tilt_arguments,
@@ -57,22 +62,40 @@ def run(args) -> int:
                                                for b, p in paths.items()]
     check_output_folder(args.out, files=seed_result_files(betas), inputs=inputs)
     fields = {}
+    nodes = {}
 
     for path in paths.values():  # every file's format checked before computing
         check_field_file(path)
 
+    heights = jnp.asarray(settings.heights())
+
     def field_for(b):
         # each run read only where its beams look, as `lidarjax table` reads it (a GridField
-        # crop is bit-exact; an OpenFOAM or VTK mesh is resampled over that region only)
+        # crop is bit-exact; an OpenFOAM or VTK mesh is resampled over that region only and
+        # made exact, the mesh's own cellPoint, at the very points simulate samples: the
+        # probe's nodes, chosen for the grid's resolution, of this beta's mount)
         region = table_region(settings, [b], scan, probe=probe, pitch=args.pitch, roll=args.roll)
-        fields[b] = load_field(paths[b], region=region)
-        return fields[b]
+        mount = settings_mount(settings, [b], pitch=args.pitch, roll=args.roll)[0]
+
+        def points(grid):
+            used = probe_for_field(grid, scan, heights, probe, caller="simulate") if probe else None
+            if used is not None:
+                nodes[b] = used.n_nodes
+            return monitor_points(scan, mount, heights, used).points
+
+        field = load_field(paths[b], region=region, exact_at=points)
+        fields[b] = getattr(field, "grid", field)  # the grid explains NaNs by its extent
+        return field
 
     sims = simulate_settings(settings, betas, field_for, scan, u_ref=args.u_ref, probe=probe,
                              pitch=args.pitch, roll=args.roll)
     write_seed_results(args.out, settings, sims, scan=args.scan, u_ref=args.u_ref,
                        sources={b: str(p) for b, p in paths.items()},
                        settings_file=args.settings, pitch=args.pitch, roll=args.roll, log=print)
+    if nodes and isinstance(probe, PulsedProbe):  # the pulsed rule depends on the count only
+        counts = " ".join(sorted({str(n) for n in nodes.values()}, key=int))
+        print(f"probe nodes per beam: {counts} (chosen for the CFD field's resolution; "
+              f"`lidarjax monitor-points --probe pulsed --probe-nodes N` writes the same nodes)")
     why = explain_nans(sims, fields, settings, paths)
     if why:
         print(f"lidarjax simulate: warning: {why}", file=sys.stderr)

@@ -236,6 +236,24 @@ class CellPointSampler:
         """Values `(n, 3)` at arbitrary points `(n, 3)`; NaN in no cell of the set."""
         q = np.asarray(q, np.float64).reshape(-1, 3)
         out = np.full((q.shape[0], 3), np.nan)
+        tets, w = self.locate(q, k_candidates)
+        found = tets >= 0
+        if found.any():
+            out[found] = self._combine(tets[found], w[found])
+        return out
+
+    def locate(self, q: np.ndarray, k_candidates: tuple[int, ...] = (8, 32, 128)
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The tetrahedron holding each point `(n, 3)` (index into the tet arrays, -1 in no
+        cell of the set) and its barycentric weights `(n, 4)` (cell centre, base, A, B; NaN
+        where not found). Candidate cells are the `k` nearest cell centres, `k` growing
+        through `k_candidates`; the first containing cell in that order wins (as OpenFOAM's
+        `findCell` by nearest centre, then neighbours)."""
+        q = np.asarray(q, np.float64).reshape(-1, 3)
+        tet_of = np.full(q.shape[0], -1, np.int64)
+        w_of = np.full((q.shape[0], 4), np.nan)
+        if self.n_cells == 0 or q.shape[0] == 0:
+            return tet_of, w_of
         todo = np.arange(q.shape[0])
         tree = cKDTree(self.cell_centre)
         # points outside every cell box cannot be in a cell: skip them at once
@@ -250,15 +268,28 @@ class CellPointSampler:
                 ids = todo[s: s + max(1, 200_000 // kk)]
                 _, cand = tree.query(q[ids], k=kk)
                 cand = cand.reshape(ids.size, kk)
-                found = self._locate(q, ids, cand, out)
+                found = self._locate(q, ids, cand, tet_of, w_of)
                 found_all[s: s + ids.size] = found
                 if kk == self.n_cells:
                     found_all[s: s + ids.size] = True
             todo = todo[~found_all]
-        return out
+        return tet_of, w_of
 
-    def _locate(self, q: np.ndarray, ids: np.ndarray, cand: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """Test the tets of candidate cells; write values; return which `ids` were found."""
+    def tet_vertices(self, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Vertex positions `(n, 4, 3)` (metres) and values `(n, 4, 3)` (m/s) of `tets`, in
+        the order cell centre, base, A, B (the order of `locate`'s weights)."""
+        tets = np.asarray(tets, np.int64)
+        cells = self.tet_cell[tets]
+        pos = np.stack([self.cell_centre[cells]] + [self.point_xyz[self.tet_pts[tets, k]]
+                                                    for k in range(3)], axis=1)
+        val = np.stack([self.cell_value[cells]] + [self.point_value[self.tet_pts[tets, k]]
+                                                   for k in range(3)], axis=1)
+        return pos, val
+
+    def _locate(self, q: np.ndarray, ids: np.ndarray, cand: np.ndarray, tet_of: np.ndarray,
+                w_of: np.ndarray) -> np.ndarray:
+        """Test the tets of candidate cells; write tets and weights; return which `ids` were
+        found."""
         pid = np.repeat(np.arange(ids.size), cand.shape[1])
         cells = cand.reshape(-1)
         inb = (q[ids[pid]] >= self.cell_lo[cells] - 1e-9 * self.cell_size[cells]).all(axis=1) & (
@@ -275,7 +306,8 @@ class CellPointSampler:
         if tpid.size:
             # first hit per point (the cell order follows the candidate order: nearest first)
             first = np.unique(tpid, return_index=True)[1]
-            out[ids[tpid[first]]] = self._combine(tets[first], w[first])
+            tet_of[ids[tpid[first]]] = tets[first]
+            w_of[ids[tpid[first]]] = w[first]
             found[tpid[first]] = True
         return found
 

@@ -53,7 +53,8 @@ from .._util import (
 )
 from ..field import GridField
 from ..progress import AbstractProgress, NoProgress, TqdmProgress, progress_meter
-from .openfoam import is_openfoam_case, read_openfoam_field, resample_openfoam
+from ._exact import cellpoint_field
+from .openfoam import is_openfoam_case, read_openfoam_field, resample_with_sampler
 from .vtk import read_vtk_field
 
 __all__ = [
@@ -670,6 +671,14 @@ def read_field_arrays(
     **Returns:** `FieldArrays` (unpacks as `x, y, z, velocity`; `.report` is a
     `FieldLoadReport`).
     """
+    return _read_field_arrays(
+        path, spacing=spacing, shape=shape, progress=progress, format=format,
+        chunk_rows=chunk_rows, region=region, time=time, max_edge_factor=max_edge_factor)[0]
+
+
+def _read_field_arrays(path, *, spacing, shape, progress, format, chunk_rows, region, time,
+                       max_edge_factor) -> tuple[FieldArrays, Any]:
+    """`read_field_arrays`, plus the cellPoint sampler of a mesh (OpenFOAM, VTK; else None)."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"field file not found: {os.fspath(p)}")
@@ -694,7 +703,7 @@ def read_field_arrays(
                 f"this {kind} file is already gridded"
             )
         arrays = _read_npz(p) if kind == "npz" else _read_netcdf(p)
-        return arrays if region is None else _crop_arrays(arrays, region)
+        return (arrays if region is None else _crop_arrays(arrays, region)), None
     points, velocity = read_fluent_points(p, progress=progress, chunk_rows=chunk_rows)
     if region is not None:
         lo, hi = _region_box(region)
@@ -707,7 +716,7 @@ def read_field_arrays(
     except ValueError as err:
         raise ValueError(f"{os.fspath(p)}: {err}") from None
     report = dataclasses.replace(arrays.report, path=os.fspath(p), format="fluent")
-    return dataclasses.replace(arrays, report=report)
+    return dataclasses.replace(arrays, report=report), None
 
 
 def load_field(
@@ -722,26 +731,43 @@ def load_field(
     format: str | None = None,
     dtype: Any = None,
     return_report: bool = False,
+    exact_at: Any = None,
 ) -> Any:
     """Load a velocity field file (or an OpenFOAM case directory) as a `lidarjax.GridField`.
 
     Arguments as `read_field_arrays` (`region=(lo, hi)` in CFD metres restricts reading and
     resampling to where the beams look, e.g. `lidarjax.scan_bounds(...)`), plus `dtype` (the
     field's working float dtype; default: JAX's default float, float64 only with x64
-    enabled) and `return_report`.
+    enabled), `return_report` and:
 
-    **Returns:** the `GridField`, or `(GridField, FieldLoadReport)` with
-    `return_report=True` (the report gives e.g. the fraction of grid nodes outside the
-    convex hull of scattered Fluent data, or an OpenFOAM grid's spacing and resampling
-    error).
+    - `exact_at`: meshes (OpenFOAM cases, VTK files) only: the points `simulate` will
+      sample, `(n, 3)` absolute CFD metres, or a function of the resampled `GridField`
+      returning them (the probe's nodes depend on the grid's resolution:
+      ``lambda g: lidarjax.monitor_points(scan, mount, heights,
+      lidarjax.probe_for_field(g, scan, heights, probe)).points``). The field returned is then
+      a `lidarjax.io.CellPointField`: the mesh's own cellPoint interpolation (what OpenFOAM's
+      `probes` report) at those points, the graded grid anywhere else. Gridded files and
+      Fluent exports are returned as their `GridField` (their grid is their own data).
+
+    **Returns:** the field, or `(field, FieldLoadReport)` with `return_report=True` (the
+    report gives e.g. the fraction of grid nodes outside the convex hull of scattered Fluent
+    data, or an OpenFOAM grid's spacing and resampling error).
     """
 
-    arrays = read_field_arrays(
+    arrays, sampler = _read_field_arrays(
         path, spacing=spacing, shape=shape, progress=progress, format=format, region=region,
-        time=time, max_edge_factor=max_edge_factor,
+        time=time, max_edge_factor=max_edge_factor, chunk_rows=200_000,
     )
     velocity = arrays.velocity if dtype is None else arrays.velocity.astype(dtype)
     field = GridField(arrays.x, arrays.y, arrays.z, velocity)
+    if exact_at is not None and sampler is not None:
+        points = exact_at(field) if callable(exact_at) else exact_at
+        field = cellpoint_field(sampler, field, points)
+        n_in = int(np.asarray(field.found).sum())
+        note = (f"exact cellPoint at the {field.n_points} points simulate samples "
+                f"({field.n_points - n_in} in no cell: NaN); the graded grid elsewhere")
+        arrays = dataclasses.replace(arrays, report=dataclasses.replace(
+            arrays.report, notes=arrays.report.notes + (note,)))
     return (field, arrays.report) if return_report else field
 
 
@@ -775,7 +801,7 @@ def _crop_arrays(arrays: FieldArrays, region: Any) -> FieldArrays:
 
 
 def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any, vtk: bool = False
-                          ) -> FieldArrays:
+                          ) -> tuple[FieldArrays, Any]:
 
     if vtk:  # VTK unstructured grids: the same cellPoint sampling (lidarjax.io.vtk)
 
@@ -783,7 +809,7 @@ def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any, vtk:
     else:
         of = read_openfoam_field(path, time=time)
     box = None if region is None else _region_box(region)
-    axes, vel, info = resample_openfoam(of, box, spacing)
+    axes, vel, info, sampler = resample_with_sampler(of, box, spacing)
     report = FieldLoadReport(
         path=os.fspath(of.case), format="vtk" if vtk else "openfoam", shape=vel.shape[:3],  # type: ignore[arg-type]
         n_points=int(of.mesh.points.shape[0]), outside_fraction=0.0, nan_fraction=_nan_fraction(vel),
@@ -792,7 +818,7 @@ def _read_openfoam_arrays(path: Path, region: Any, spacing: Any, time: Any, vtk:
         resample_error_rms=info.get("resample_error_rms", math.nan),
         resample_error_max=info.get("resample_error_max", math.nan), notes=tuple(info["notes"]),
     )
-    return FieldArrays(axes[0], axes[1], axes[2], vel, report)
+    return FieldArrays(axes[0], axes[1], axes[2], vel, report), sampler
 
 
 def _as_arrays(field_or_arrays: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

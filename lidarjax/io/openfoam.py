@@ -448,6 +448,25 @@ def resample_openfoam(
 
     **Returns:** `(axes, velocity (nx, ny, nz, 3), info)`; NaN nodes are in no cell.
     """
+    axes, velocity, info, _ = resample_with_sampler(
+        of, region, spacing, resolution=resolution, max_nodes=max_nodes,
+        check_points=check_points, seed=seed)
+    return axes, velocity, info
+
+
+def resample_with_sampler(
+    of: OpenFOAMField,
+    region: tuple[Any, Any] | None,
+    spacing: float | Sequence[float] | None = None,
+    *,
+    resolution: float = DEFAULT_RESOLUTION,
+    max_nodes: int = DEFAULT_MAX_NODES,
+    check_points: int = 2000,
+    seed: int = 0,
+) -> tuple[list[np.ndarray], np.ndarray, dict[str, Any], CellPointSampler]:
+    """`resample_openfoam`, also returning the cellPoint sampler over the cells the grid
+    covers (to prepare exact points there without building it twice:
+    `lidarjax.io._exact.cellpoint_field`)."""
     mesh = of.mesh
     clo, chi = of.bounds
     if region is None:
@@ -526,7 +545,7 @@ def resample_openfoam(
         info["check_points"] = int(ok.sum())
         info["resample_error_rms"] = float(np.sqrt(np.mean(err ** 2))) if err.size else math.nan
         info["resample_error_max"] = float(err.max()) if err.size else math.nan
-    return axes, velocity, info
+    return axes, velocity, info, sampler
 
 
 # ---------------------------------------------------------------- decomposed cases

@@ -1,0 +1,207 @@
+"""A mesh field that is exact at the points `simulate` will ask for: OpenFOAM's cellPoint there.
+
+A CFD mesh is resampled onto a graded grid (`lidarjax.io.openfoam.resample_openfoam`) so
+that `simulate` can sample it anywhere; trilinear interpolation on that grid differs from the
+mesh's own cellPoint interpolation where the flow shears across a few cells (0.1 m/s of lidar
+speed for a pulsed probe whose nodes sit in a roof's shear layer). The points `simulate`
+samples are fixed by the scan, the mount, the heights and the probe, so they can be prepared
+on the host: for each one, the cellPoint tetrahedron holding it (`lidarjax.io._cells`: the
+cell centre and three face points, with the cell value and `volPointInterpolation`'s point
+values). `CellPointField` then answers a query at one of those points with the barycentric
+mix in its tetrahedron (exactly what OpenFOAM's `probes` with `interpolationScheme cellPoint`
+report there) and any other query from the graded grid it wraps.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from ..field import AbstractField, GridField
+from ._cells import CellPointSampler
+
+__all__ = ["CellPointField", "cellpoint_field"]
+
+# A fixed direction, not along any axis or diagonal, on which the prepared points are sorted.
+_KEY = np.array([0.5773502691896258, 0.6741998624632421, 0.46056110315609574])
+_KEY = _KEY / np.linalg.norm(_KEY)
+
+
+class CellPointField(AbstractField):
+    """A graded `GridField` made exact at prepared points by the mesh's own cellPoint tets.
+
+    **Arguments:**
+
+    - `grid`: the `GridField` resampled from the mesh (its `origin` and `resolution` are this
+      field's; it answers every query that is not a prepared point).
+    - `points`: ``(n, 3)`` the prepared points, absolute CFD metres (e.g. the
+      `lidarjax.monitor_points` of the mounts to be simulated).
+    - `vertices`: ``(n, 4, 3)`` absolute CFD metres: the cellPoint tetrahedron holding each
+      point (cell centre, then three face points); NaN rows for a point in no cell.
+    - `values`: ``(n, 4, 3)`` m/s, CFD frame: the cell value and the three point values at
+      those vertices; NaN rows for a point in no cell. Stored in the grid's dtype.
+    - `tolerance`: how far (metres) a query may lie from a prepared point and still be
+      answered from its tetrahedron; default ``1e-9`` (float64) or ``2e-5`` (float32) times
+      the largest distance of a point from the origin (at least that times one metre), which
+      covers the rounding of `simulate`'s own points in the grid's dtype.
+
+    `sample_local` at a query within `tolerance` of a prepared point returns the barycentric
+    mix of that tetrahedron's vertex values at the query (the tetrahedron found by nearest
+    point, its index under `stop_gradient`): exact cellPoint there, NaN where the point is in
+    no cell (a solid, as OpenFOAM's "Not Found"), differentiable in `values` and in the query
+    position (the barycentric coordinates). Any other query: the grid's trilinear value.
+    The lookup sorts the points along a fixed direction and compares a query with the few
+    points whose projection lies within the tolerance (a binary search, then a fixed window).
+    """
+
+    grid: GridField
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
+    points_local: Float[Array, "n 3"]
+    anchor: Float[Array, "n 3"]
+    inverse: Float[Array, "n 3 3"]
+    values: Float[Array, "n 4 3"]
+    found: Bool[Array, " n"]
+    tolerance: Float[Array, ""]
+    projection: Float[Array, " n"]
+    order: Int[Array, " n"]
+    window: int = eqx.field(static=True)
+
+    def __init__(self, grid: GridField, points: Any, vertices: Any, values: Any, *,
+                 tolerance: float | None = None):
+        if not isinstance(grid, GridField):
+            raise ValueError(f"CellPointField: `grid` must be a lidarjax.GridField, got {type(grid).__name__}")
+        pts = np.asarray(points, np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 3 or pts.shape[0] == 0 or not np.isfinite(pts).all():
+            raise ValueError(f"CellPointField: `points` must be finite (n, 3) CFD metres, n >= 1; "
+                             f"got shape {pts.shape}")
+        n = pts.shape[0]
+        vert = np.asarray(vertices, np.float64)
+        val = np.asarray(values, np.float64)
+        for name, a in (("vertices", vert), ("values", val)):
+            if a.shape != (n, 4, 3):
+                raise ValueError(f"CellPointField: `{name}` must have shape ({n}, 4, 3), got {a.shape}")
+        dtype = grid.dtype
+        self.grid = grid
+        self.origin, self.origin_lo = grid.origin, grid.origin_lo
+        o64 = np.asarray(grid.origin, np.float64) + np.asarray(grid.origin_lo, np.float64)
+        local = pts - o64
+        # barycentric coordinates relative to each point: lam(1..3) = inverse @ (q - p - anchor)
+        found = np.isfinite(vert).all(axis=(1, 2)) & np.isfinite(val).all(axis=(1, 2))
+        rel = np.where(found[:, None, None], vert - pts[:, None, :], 0.0)
+        edges = np.stack([rel[:, k] - rel[:, 0] for k in (1, 2, 3)], axis=2)  # columns
+        det = np.linalg.det(edges)
+        scale = np.max(np.abs(edges), axis=(1, 2)) ** 3
+        found &= np.abs(det) > 1e-12 * np.maximum(scale, 1e-300)
+        inv = np.zeros_like(edges)
+        if found.any():
+            inv[found] = np.linalg.inv(edges[found])
+        if tolerance is None:
+            rel_tol = 1e-9 if np.dtype(dtype).itemsize >= 8 else 2e-5
+            tolerance = rel_tol * max(1.0, float(np.linalg.norm(local, axis=1).max()))
+        tol = float(tolerance)
+        if not tol > 0:
+            raise ValueError(f"CellPointField: `tolerance` must be positive metres, got {tolerance!r}")
+        proj = local @ _KEY
+        order = np.argsort(proj, kind="stable")
+        sp = proj[order]
+        count = np.searchsorted(sp, sp + 2 * tol, side="right") - np.arange(sp.size)
+        self.window = max(4, int(count.max()))
+        self.points_local = jnp.asarray(local.astype(dtype))
+        self.anchor = jnp.asarray(np.where(found[:, None], rel[:, 0], 0.0).astype(dtype))
+        self.inverse = jnp.asarray(inv.astype(dtype))
+        self.values = jnp.asarray(np.where(found[:, None, None], val, 0.0).astype(dtype))
+        self.found = jnp.asarray(found)
+        self.tolerance = jnp.asarray(tol, dtype)
+        self.projection = jnp.asarray(sp.astype(dtype))
+        self.order = jnp.asarray(order.astype(np.int32))
+
+    @property
+    def resolution(self) -> float | None:
+        """The grid's resolution (m): probe nodes are chosen for it, as for the grid alone."""
+        return self.grid.resolution
+
+    @property
+    def n_points(self) -> int:
+        """Number of prepared points."""
+        return int(self.points_local.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the grid and the prepared tetrahedra."""
+        extra = sum(int(a.size * a.dtype.itemsize) for a in (
+            self.points_local, self.anchor, self.inverse, self.values, self.projection, self.order))
+        return self.grid.nbytes + extra
+
+    def _match(self, points):
+        """Index of the nearest prepared point `(...)` and whether it is within tolerance."""
+        key = jnp.asarray(_KEY, self.dtype)
+        p = points @ key
+        method = "compare_all" if self.n_points <= 4096 else "scan"
+        start = jnp.searchsorted(self.projection, p - self.tolerance, side="left", method=method)
+        idx = jnp.clip(start[..., None] + jnp.arange(self.window), 0, self.n_points - 1)
+        cand = self.order[idx]  # (..., window)
+        d2 = jnp.sum((self.points_local[cand] - points[..., None, :]) ** 2, axis=-1)
+        k = jnp.argmin(d2, axis=-1)
+        best = jnp.take_along_axis(cand, k[..., None], axis=-1)[..., 0]
+        dmin = jnp.take_along_axis(d2, k[..., None], axis=-1)[..., 0]
+        return best, dmin <= self.tolerance**2
+
+    def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+        """Velocity (m/s, CFD frame) at points relative to `origin` (metres): cellPoint at the
+        prepared points (NaN there in no cell), the grid's trilinear value elsewhere."""
+        points = jnp.asarray(points).astype(self.dtype)
+        best, hit = self._match(jax.lax.stop_gradient(points))
+        d = points - self.points_local[best] - self.anchor[best]
+        lam = jnp.einsum("...ij,...j->...i", self.inverse[best], d)
+        lam = jnp.concatenate([1 - jnp.sum(lam, axis=-1, keepdims=True), lam], axis=-1)
+        exact = jnp.einsum("...k,...kc->...c", lam, self.values[best])
+        found = self.found[best]
+        exact = jnp.where(found[..., None], exact, jnp.nan)  # values are finite: NaN put in last
+        return jnp.where(hit[..., None], exact, self.grid.sample_local(points))
+
+
+def cellpoint_field(
+    source: Any,
+    grid: GridField,
+    points: Float[ArrayLike, "n 3"],
+    *,
+    tolerance: float | None = None,
+) -> CellPointField:
+    """`grid` made exact (OpenFOAM's cellPoint) at `points`.
+
+    **Arguments:**
+
+    - `source`: the mesh field (`lidarjax.io.read_openfoam_field`, a VTK mesh from
+      `lidarjax.io.vtk.read_vtk_field`) or a `CellPointSampler` built from it over cells that
+      hold the points.
+    - `grid`: the `GridField` resampled from it (`resample_openfoam`), answering every other
+      query.
+    - `points`: ``(n, 3)`` absolute CFD metres: the points `simulate` will sample, e.g.
+      ``lidarjax.monitor_points(scan, mount, heights, lidarjax.probe_for_field(grid, scan,
+      heights, probe)).points``.
+    - `tolerance`: see `CellPointField`.
+
+    **Returns:** a `CellPointField`.
+    """
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    if pts.shape[0] == 0 or not np.isfinite(pts).all():
+        raise ValueError("cellpoint_field: `points` must be finite (n, 3) CFD metres, n >= 1")
+    if isinstance(source, CellPointSampler):
+        sampler = source
+    else:
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        pad = 1e-6 * np.maximum(1.0, np.abs(np.concatenate([lo, hi])).max())
+        sampler = source.sampler(source.cells_in_box(lo - pad, hi + pad))
+    tets, _ = sampler.locate(pts)
+    found = tets >= 0
+    vertices = np.full((pts.shape[0], 4, 3), np.nan)
+    values = np.full((pts.shape[0], 4, 3), np.nan)
+    if found.any():
+        vertices[found], values[found] = sampler.tet_vertices(tets[found])
+    return CellPointField(grid, pts, vertices, values, tolerance=tolerance)
