@@ -5,7 +5,7 @@ and docs use.
 Layers, lowest first (each may import only itself and the ones before it):
 
 0. shared helpers: ``lidarjax._util``, ``lidarjax._precision``, ``lidarjax._deprecated``;
-1. the core (every other module at the package root except ``plots``);
+1. the core (every other module at the package root except ``plots``, and ``lidarjax.scanning``);
 2. ``lidarjax.scenes``;
 3. ``lidarjax.io``;
 4. ``lidarjax.plots``;
@@ -39,6 +39,8 @@ def layer(module: str) -> int:
         return 0
     parts = module.split(".")
     if len(parts) == 2 and parts[1] not in ("scenes", "io", "plots", "workflows", "cli"):
+        return 1
+    if parts[1] == "scanning":  # a core subpackage (scanning lidars)
         return 1
     return {"scenes": 2, "io": 3, "plots": 4, "workflows": 5, "cli": 6}[parts[1]]
 

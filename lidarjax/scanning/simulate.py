@@ -1,0 +1,195 @@
+"""Scanning-lidar forward model: LOS per (ray, range gate), in a steady field or through time.
+
+`simulate_scan` samples a steady field (a time-dependent one at ``t = 0``); `simulate_scan_series`
+flies the scan's trajectory through a time-dependent field (`AbstractField.sample_local_at`:
+`lidarjax.scenes.FrozenTurbulence`, or any field that defines it), every sub-ray at its own
+time. Both use the profilers' machinery unchanged: the mount's frame chain
+(`lidarjax.body_to_cfd_rotation`: location, beta/gamma/psi, pitch and roll, the nacelle's
+``pitch = -90``), the probe quadrature of `lidarjax.simulate` (a `lidarjax.PulsedProbe` per
+gate: each gate centre is a focus range, cut at the lidar), probe nodes chosen for the
+field's resolution (`lidarjax.probe.probe_for_ranges`), NaN plus a flag outside the field.
+
+A ray is the mean of its `ScanPattern.n_sub` sub-rays (the arc swept during accumulation; see
+`lidarjax.scanning.pattern`). A batched `lidarjax.Mount` (``(s, 3)`` locations) adds a leading
+mount axis to every result (one compiled call, vmapped).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float, Int
+
+from .._precision import difference, is_concrete
+from ..field import AbstractField
+from ..flags import Flag
+from ..forward import _beam_los
+from ..frames import body_to_cfd_rotation, rotate
+from ..mount import Mount
+from ..probe import AbstractProbe, PointProbe, probe_for_ranges
+from .pattern import ScanPattern
+
+__all__ = ["ScanResult", "simulate_scan", "simulate_scan_series"]
+
+
+class ScanResult(eqx.Module):
+    """A simulated scan (dimensions: ``r`` rays, ``g`` gates, ``n`` scans of a series; a
+    batched mount adds a leading mount axis to every field).
+
+    - `los`: ``(r, g)`` (series: ``(n, r, g)``) LOS velocities, m/s, positive away from the
+      lidar; NaN where a probe node is outside the field or in a solid.
+    - `times`: ``(r,)`` (series ``(n, r)``) mid-accumulation time of each ray, s.
+    - `ranges`: ``(g,)`` gate-centre ranges, m.
+    - `azimuth`, `elevation`: ``(r,)`` the rays' nominal angles (body frame, degrees), as the
+      instrument reports them.
+    - `directions`: ``(r, 3)`` the rays' unit vectors at mid-accumulation, CFD frame.
+    - `points`: ``(r, g, 3)`` gate centres at mid-accumulation, CFD metres.
+    - `flags`: int32 like `los`: `lidarjax.Flag.BEAM_OUTSIDE` (NaN), `PROBE_TRUNCATED`.
+    """
+
+    los: Float[Array, "*n r g"]
+    times: Float[Array, "*n r"]
+    ranges: Float[Array, " g"]
+    azimuth: Float[Array, " r"]
+    elevation: Float[Array, " r"]
+    directions: Float[Array, "r 3"]
+    points: Float[Array, "r g 3"]
+    flags: Int[Array, "*n r g"]
+
+
+def _validate(fn, field, pattern, mount, probe):
+    if not isinstance(field, AbstractField):
+        raise ValueError(f"{fn}: `field` must be a lidarjax.GridField or a scene, got "
+                         f"{type(field).__name__}.")
+    if not isinstance(pattern, ScanPattern):
+        raise ValueError(f"{fn}: `pattern` must be a lidarjax.scanning.ScanPattern (e.g. "
+                         f"lidarjax.scanning.ppi(...)), got {type(pattern).__name__}.")
+    if not isinstance(mount, Mount):
+        raise ValueError(f"{fn}: `mount` must be a lidarjax.Mount, got {type(mount).__name__}.")
+    if not isinstance(probe, AbstractProbe):
+        raise ValueError(f"{fn}: `probe` must be a lidarjax probe, got {type(probe).__name__}.")
+
+
+def _refine(field, pattern, probe, caller):
+    if isinstance(probe, PointProbe) or not is_concrete(pattern.ranges):
+        return probe
+    try:
+        resolution = field.resolution
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        return probe
+    return probe_for_ranges(probe, resolution, np.asarray(pattern.ranges, np.float64), caller=caller)
+
+
+def simulate_scan(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
+                  probe: AbstractProbe | None = None,
+                  start: Float[ArrayLike, ""] = 0.0) -> ScanResult:
+    """LOS of every (ray, gate) of `pattern` in a steady `field`.
+
+    **Arguments:**
+
+    - `field`: a `lidarjax.GridField` or a scene (CFD frame, m/s); a time-dependent field is
+      sampled at ``t = 0`` (use `simulate_scan_series` to fly through time).
+    - `pattern`: the scan (`lidarjax.scanning.ppi`, `rhi`, `stare`, `vad`,
+      `spinner_rosette`, or a `ScanPattern`).
+    - `mount`: the lidar's `lidarjax.Mount` (one, or a batch: leading mount axis).
+    - `probe`: range weighting per gate (default `lidarjax.PointProbe`; a scanning pulsed
+      lidar: `lidarjax.scanning.instrument_probe`). Nodes without an explicit count are
+      chosen for the field's resolution.
+    - `start`: time of the scan start, s (only shifts `times`).
+
+    **Returns:** a `ScanResult`; its dtype follows the field's. Jit-compiled; every number is
+    differentiable (field values, angles, rates, ranges, mount, probe).
+    """
+    probe = PointProbe() if probe is None else probe
+    _validate("simulate_scan", field, pattern, mount, probe)
+    probe = _refine(field, pattern, probe, "simulate_scan")
+    return _steady_jit(field, pattern, mount, probe, jnp.asarray(start, field.dtype))
+
+
+def simulate_scan_series(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
+                         n_scans: int = 1, start: Float[ArrayLike, ""] = 0.0,
+                         probe: AbstractProbe | None = None) -> ScanResult:
+    """Fly `n_scans` repetitions of `pattern` (every `ScanPattern.period` from `start`, s)
+    through a time-dependent `field`: every sub-ray samples the field at its own time
+    (`AbstractField.los_local_at`), so a moving beam averages over its swept arc *and* over
+    the time it takes.
+
+    The sample points are the same in every repetition (a fixed mount), so the field is
+    prepared for them once (`AbstractField.time_sampler`: frozen turbulence builds one line
+    along the wind per point when it pays) and sampled at every time. For a series of
+    different rays (a trajectory that never repeats), put them in one long pattern
+    (`ScanPattern.repeated` or your own) with ``n_scans=1``.
+
+    **Arguments:** as `simulate_scan`, plus `n_scans` (static: shapes). **Returns:** a
+    `ScanResult` with `los` and `flags` ``(n, r, g)`` and `times` ``(n, r)``.
+    """
+    probe = PointProbe() if probe is None else probe
+    _validate("simulate_scan_series", field, pattern, mount, probe)
+    if int(n_scans) != n_scans or int(n_scans) < 1:
+        raise ValueError(f"simulate_scan_series: n_scans must be a positive integer, got {n_scans!r}.")
+    if is_concrete(start) and not np.isfinite(np.asarray(start, np.float64)).all():
+        raise ValueError(f"simulate_scan_series: `start` must be finite seconds, got {start!r}.")
+    probe = _refine(field, pattern, probe, "simulate_scan_series")
+    return _series_jit(field, pattern, mount, probe, jnp.asarray(start, field.dtype),
+                       n_scans=int(n_scans))
+
+
+def _core(field, pattern, mount, probe, start, n_scans):
+    """The scan in one mount's geometry; `n_scans` None: steady."""
+    dtype = field.dtype
+    cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
+    origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo,
+                              dtype)
+    pattern = jax.tree_util.tree_map(cast, pattern)
+    mount_d = jax.tree_util.tree_map(cast, mount)
+    r, k, g = pattern.n_rays, pattern.n_sub, pattern.n_gates
+    to_cfd = body_to_cfd_rotation(mount_d)
+    n_cfd = rotate(to_cfd, pattern.sub_directions().reshape(r * k, 3))  # (B, 3)
+    ranges = jnp.broadcast_to(pattern.ranges[:, None], (g, r * k))
+    if n_scans is None:
+        los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)
+        times = start + pattern.ray_times()
+    else:
+        scans = jnp.arange(n_scans, dtype=dtype)[:, None, None] * pattern.period
+        t_sub = (start + scans + pattern.sub_times()[None]).reshape(n_scans, 1, r * k)  # (n, 1, B)
+
+        def los_at(pts, dirs):
+            t = t_sub[..., None] if pts.ndim == 4 else t_sub
+            return field.time_sampler(pts, dirs, n_times=n_scans)(t)
+
+        los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)
+        times = start + scans[:, :, 0] + pattern.ray_times()[None]
+    los = jnp.mean(los.reshape(los.shape[:-1] + (r, k)), axis=-1)  # (..., g, r)
+    los = jnp.swapaxes(los, -1, -2)  # (..., r, g)
+    flags = jnp.where(jnp.isfinite(los), 0, int(Flag.BEAM_OUTSIDE))
+    if truncated is not None:
+        cut = jnp.any(truncated.reshape(g, r, k), axis=-1).T  # (r, g)
+        flags = flags | jnp.where(cut, int(Flag.PROBE_TRUNCATED), 0)
+    n_mid = rotate(to_cfd, pattern.directions())
+    points = (field.origin + (origin_local + pattern.ranges[None, :, None] * n_mid[:, None, :])
+              + field.origin_lo)
+    return ScanResult(los=los, times=times, ranges=pattern.ranges, azimuth=pattern.azimuth,
+                      elevation=pattern.elevation, directions=n_mid, points=points,
+                      flags=flags.astype(jnp.int32))
+
+
+def _run(field, pattern, mount, probe, start, n_scans):
+    # tiny rotation products keep the field's precision (TF32 on GPUs; see lidarjax.forward)
+    with jax.default_matmul_precision("highest"):
+        if mount.batch_shape:
+            return jax.vmap(lambda m: _core(field, pattern, m, probe, start, n_scans))(mount)
+        return _core(field, pattern, mount, probe, start, n_scans)
+
+
+def _steady(field, pattern, mount, probe, start):
+    return _run(field, pattern, mount, probe, start, None)
+
+
+def _series(field, pattern, mount, probe, start, *, n_scans):
+    return _run(field, pattern, mount, probe, start, n_scans)
+
+
+_steady_jit = jax.jit(_steady)
+_series_jit = jax.jit(_series, static_argnames=("n_scans",))
