@@ -5,12 +5,18 @@ time, and the reconstructions they feed (VAD/DBS profiles, dual-Doppler vectors)
 - `pattern`: `ScanPattern`, one repetition of a scan (rays, timing, gates).
 - `presets`: `ppi`, `rhi`, `stare`, `vad`, `spinner_rosette`, `instrument_probe`.
 - `simulate`: `simulate_scan` (steady), `simulate_scan_series` (through time), `ScanResult`.
-- `vad`: `vad_fit`, the per-gate least-squares sine fit at any elevation.
+- `profiles`: `vad_fit`, the per-gate least-squares sine fit at any elevation.
 - `dual`: `dual_doppler`, vectors where two lidars' beams cross.
 
 See ``docs/scanning.md``.
 """
 
+from .dual import DUAL_ILL_CONDITIONED as DUAL_ILL_CONDITIONED
+from .dual import CrossingGeometry as CrossingGeometry
+from .dual import DualDoppler as DualDoppler
+from .dual import crossing_geometry as crossing_geometry
+from .dual import dual_doppler as dual_doppler
+from .dual import simulate_dual_doppler as simulate_dual_doppler
 from .pattern import ScanPattern as ScanPattern
 from .pattern import gate_ranges as gate_ranges
 from .pattern import ray_unit_vectors as ray_unit_vectors
@@ -23,6 +29,8 @@ from .presets import rosette_angles as rosette_angles
 from .presets import spinner_rosette as spinner_rosette
 from .presets import stare as stare
 from .presets import vad as vad
+from .profiles import VadProfile as VadProfile
+from .profiles import vad_fit as vad_fit
 from .simulate import ScanResult as ScanResult
 from .simulate import simulate_scan as simulate_scan
 from .simulate import simulate_scan_series as simulate_scan_series
