@@ -13,6 +13,8 @@
 - `openfoam`: OpenFOAM case directories (mesh + `U`, ASCII/binary/gzip) and OpenFOAM's own
   cellPoint interpolation at arbitrary points (`sample_openfoam`).
 - `vtk`: VTK unstructured meshes (`.vtu`, `.vtk`, `.vtm`; extra ``meshio``).
+- `hpl`, `windcube_scan`, `scan_netcdf`: scanning lidars (Halo `.hpl`, Windcube 200S/400S
+  NetCDF; CF NetCDF of scans, time x beam x range).
 - `layout`: wind-farm layouts (seed 004's `<name> <easting> <northing>`), turbine types.
 - `turbulence`: turbulence boxes (HAWC2 binary, TurbSim `.bts`).
 - `motion`: platform motion logs.
@@ -38,6 +40,8 @@ from .fields import read_fluent_points as read_fluent_points
 from .fields import resample_to_grid as resample_to_grid
 from .fields import save_field_netcdf as save_field_netcdf
 from .fields import save_field_npz as save_field_npz
+from .hpl import HaloScan as HaloScan
+from .hpl import read_hpl as read_hpl
 from .layout import FarmLayout as FarmLayout
 from .layout import read_farm as read_farm
 from .layout import read_layout as read_layout
@@ -66,6 +70,8 @@ from .rtd import RtdRecord as RtdRecord
 from .rtd import group_rtd as group_rtd
 from .rtd import instrument_reconstruction as instrument_reconstruction
 from .rtd import read_rtd as read_rtd
+from .scan_netcdf import read_scan_netcdf as read_scan_netcdf
+from .scan_netcdf import write_scan_netcdf as write_scan_netcdf
 from .seed_output import SEED_COLUMNS as SEED_COLUMNS
 from .seed_output import SEED_UNITS as SEED_UNITS
 from .seed_output import CsvTable as CsvTable
@@ -92,6 +98,8 @@ from .turbulence import read_hawc2_box as read_hawc2_box
 from .turbulence import read_turbsim as read_turbsim
 from .turbulence import write_hawc2_box as write_hawc2_box
 from .turbulence import write_turbsim as write_turbsim
+from .windcube_scan import WindcubeScan as WindcubeScan
+from .windcube_scan import read_windcube_scan as read_windcube_scan
 from .zephir import ZephirRecord as ZephirRecord
 from .zephir import read_zephir_csv as read_zephir_csv
 
