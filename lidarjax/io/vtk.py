@@ -158,52 +158,141 @@ def _cell_faces(mesh, path: Path):
     return pad, np.concatenate(cell_ids), np.concatenate(sizes), n_cells, kept_blocks
 
 
+def _sorted_rows(pad: np.ndarray, sizes: np.ndarray, fill: int) -> np.ndarray:
+    """Each row of `pad` (vertex ids, `-1` beyond `sizes`) sorted, the padding as `fill`
+    (above every id): triangles and quads by a sorting network, longer rows by `np.sort`."""
+    key = np.where(pad < 0, fill, pad)
+    small = sizes <= 4
+    rows = None if small.all() else np.flatnonzero(small)
+    k = key[:, :4] if rows is None else key[rows, :4]
+    if k.shape[1] == 4:
+        for i, j in ((0, 1), (2, 3), (0, 2), (1, 3), (1, 2)):
+            lo = np.minimum(k[:, i], k[:, j])
+            np.maximum(k[:, i], k[:, j], out=k[:, j])
+            k[:, i] = lo
+    else:
+        k = np.sort(k, axis=1)
+    if rows is None:
+        key[:, :4] = k
+    else:
+        key[rows, :4] = k
+        big = np.flatnonzero(~small)
+        key[big] = np.sort(key[big], axis=1)
+    return key
+
+
 def _unique_rows(key: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """Group equal rows of `key` (`(n, k)` int64, each row sorted, padding above every
-    label): `(order, group)`, `order` sorting the rows lexicographically (stable, so
-    `np.unique(key, axis=0)`'s order) and `group[i]` the unique-row number of row
-    `order[i]`."""
+    """Group equal rows of `key` (`(n, k)` int64, each row sorted, every id in
+    `0..n_points`, `n_points` being the padding): `(order, group)`, `order` sorting the
+    rows lexicographically (stable, so `np.unique(key, axis=0)`'s order) and `group[i]` the
+    unique-row number of row `order[i]`.
+
+    Rows are packed a few columns per int64 (order kept) and sorted on the packs covering
+    their three smallest ids, which already tell two faces of a valid mesh apart; the other
+    packs are then compared where those tie, and a full lexicographic sort is done only
+    when they differ there."""
     n, width = key.shape
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    base = np.int64(n_points) + 1  # labels 0..n_points-1, padding mapped to n_points
-    cols = np.minimum(key, base - 1)
-    # pack as many columns per int64 as fit (lexicographic order is kept)
+    base = np.int64(n_points) + 1
     per = max(1, int(np.floor(62 * np.log(2) / np.log(float(base)))))
-    packed = []
-    for j in range(0, width, per):
-        k = np.zeros(n, np.int64)
-        for c in range(j, min(j + per, width)):
-            k = k * base + cols[:, c]
-        packed.append(k)
-    order = packed[0].argsort(kind="stable") if len(packed) == 1 else np.lexsort(packed[::-1])
-    srt = [k[order] for k in packed]
-    new = np.zeros(n, bool)
-    new[0] = True
-    for k in srt:
-        new[1:] |= k[1:] != k[:-1]
-    return order, np.cumsum(new) - 1
+
+    def pack(j: int, rows=slice(None)) -> np.ndarray:
+        k = key[rows, j].astype(np.int64)
+        for c in range(j + 1, min(j + per, width)):
+            k = k * base + key[rows, c]
+        return k
+
+    packs = range(0, width, per)
+    n_primary = min(len(packs), -(-3 // per))
+    primary = [pack(j) for j in packs[:n_primary]]
+    if n_primary == 1:
+        # quicksort, then equal keys put back in row order (equal keys come in pairs in a
+        # valid mesh: the two sides of a face)
+        order = primary[0].argsort()
+        ks = primary[0][order]
+        tie = ks[1:] == ks[:-1]
+        if np.any(tie[1:] & tie[:-1]):
+            order = primary[0].argsort(kind="stable")
+        else:
+            at = np.flatnonzero(tie)
+            at = at[order[at] > order[at + 1]]
+            order[at], order[at + 1] = order[at + 1], order[at].copy()
+    else:
+        order = np.lexsort(primary[::-1])
+        tie = np.ones(n - 1, bool)
+        for k in primary:
+            ks = k[order]
+            tie &= ks[1:] == ks[:-1]
+    at = np.flatnonzero(tie)
+    rest = n_primary * per  # the columns the primary packs do not cover
+    if at.size and rest < width and np.any(key[order[at], rest:] != key[order[at + 1], rest:]):
+        order = np.lexsort([pack(j) for j in packs][::-1])
+        tie = np.ones(n - 1, bool)
+        for j in packs:
+            ks = pack(j, order)
+            tie &= ks[1:] == ks[:-1]
+    group = np.zeros(n, np.int64)
+    np.cumsum(~tie, out=group[1:])
+    return order, group
 
 
-def _vertex_sum(points: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
-    """Sum of the points of each padded row of vertex ids (`rows` `(n, k)`, the first
-    `sizes[i]` entries valid), added column by column (in vertex order)."""
-    acc = points[rows[:, 0]]
-    for j in range(1, rows.shape[1]):
-        r = np.flatnonzero(sizes > j)
-        if r.size == rows.shape[0]:
-            acc += points[rows[:, j]]
-        elif r.size:
-            acc[r] += points[rows[r, j]]
-    return acc
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """`np.cross` of `(n, 3)` vectors (the same products and differences)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def _face_centre_normal(points: np.ndarray, pad: np.ndarray, faces: np.ndarray, nv: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex mean `fc` `(n, 3)` of each face (rows `faces` of the padded vertex ids `pad`,
+    the first `nv[i]` valid) and twice its area vector: the sum over its edges of ``(p_j - fc) x (p_next -
+    fc)``; both summed vertex by vertex, in the face's order."""
+    n = faces.size
+    cols = []  # per vertex column: the faces having it (None: all) and their points
+    acc = np.zeros((n, 3))
+    for j in range(pad.shape[1]):
+        r = np.flatnonzero(nv > j)
+        if r.size == 0:
+            break
+        rows = None if r.size == n else r
+        pj = points[pad[faces, j]] if rows is None else points[pad[faces[r], j]]
+        cols.append((rows, pj))
+        if j == 0:
+            acc[...] = pj
+        elif rows is None:
+            acc += pj
+        else:
+            acc[rows] += pj
+    fc = acc / nv[:, None]
+    d = [pj - (fc if rows is None else fc[rows]) for rows, pj in cols]
+    normal = np.zeros((n, 3))
+    for j, (rows, _) in enumerate(cols):
+        # the next vertex: column j + 1 where the face has one (a subset of these rows, in
+        # the same order), else the first vertex
+        has_next = nv > j + 1 if rows is None else nv[rows] > j + 1
+        if j + 1 < len(cols) and has_next.all():
+            nxt = d[j + 1]
+        else:
+            first = d[0] if rows is None else d[0][rows]
+            nxt = first.copy()
+            if j + 1 < len(cols):
+                nxt[has_next] = d[j + 1]
+        term = _cross(d[j], nxt)
+        if j == 0:
+            normal[...] = term
+        elif rows is None:
+            normal += term
+        else:
+            normal[rows] += term
+    return fc, normal
 
 
 def _poly_mesh(points: np.ndarray, pad, cell_of, sizes, n_cells, path: Path) -> PolyMesh:
     """The face-based mesh of the cells' faces (`pad`: one padded row of vertex ids per face
     of each cell, `cell_of` its cell): each face once, owned by the lower cell number and
     oriented out of it, internal faces first (by owner), then the boundary faces."""
-    big = np.iinfo(np.int64).max
-    key = np.sort(np.where(pad < 0, big, pad), axis=1)
+    key = _sorted_rows(pad, sizes, points.shape[0])
     order, group = _unique_rows(key, points.shape[0])
     n_faces = int(group[-1]) + 1 if group.size else 0
     counts = np.bincount(group, minlength=n_faces)
@@ -219,34 +308,27 @@ def _poly_mesh(points: np.ndarray, pad, cell_of, sizes, n_cells, path: Path) -> 
     own_pos = np.flatnonzero(cell_sorted == owner[group])
     first = np.r_[True, group[own_pos[1:]] != group[own_pos[:-1]]]
     occ = order[own_pos[first]]
-    verts, nv = pad[occ], sizes[occ]
-    # centroid of each cell: mean over its faces of their vertex means
-    face_mean = _vertex_sum(points, pad, sizes) / sizes[:, None]
-    centroid = np.stack([np.bincount(cell_of, weights=face_mean[:, a], minlength=n_cells)
-                         for a in range(3)], axis=1)
-    centroid /= np.maximum(np.bincount(cell_of, minlength=n_cells), 1)[:, None]
-    fc = _vertex_sum(points, verts, nv) / nv[:, None]
-    # sum over the face's edges of (p_j - fc) x (p_next - fc), column by column
-    normal = np.zeros((verts.shape[0], 3))
-    for j in range(verts.shape[1]):
-        rows = np.flatnonzero(nv > j)
-        nxt = np.where(j + 1 < nv[rows], verts[rows, min(j + 1, verts.shape[1] - 1)], verts[rows, 0])
-        c = fc[rows]
-        term = np.cross(points[verts[rows, j]] - c, points[nxt] - c)
-        if j == 0:
-            normal[rows] = term
-        else:
-            normal[rows] += term
+    nv = sizes[occ]
+    fc, normal = _face_centre_normal(points, pad, occ, nv)
+    # an interior point of each cell: the mean of its face centres
+    centroid = np.zeros((n_cells, 3))
+    count = np.bincount(owner, minlength=n_cells) + np.bincount(neighbour[neighbour >= 0],
+                                                                minlength=n_cells)
+    for a in range(3):
+        centroid[:, a] = (np.bincount(owner, weights=fc[:, a], minlength=n_cells)
+                          + np.bincount(neighbour[neighbour >= 0], weights=fc[neighbour >= 0, a],
+                                        minlength=n_cells))
+    centroid /= np.maximum(count, 1)[:, None]
     flip = np.einsum("ij,ij->i", normal, fc - centroid[owner]) < 0
+    internal = neighbour >= 0
+    order = np.concatenate([np.flatnonzero(internal)[np.argsort(owner[internal], kind="stable")],
+                            np.flatnonzero(~internal)])
+    verts, nv, flip = pad[occ[order]], nv[order], flip[order]
     if flip.any():  # reverse the first nv[i] labels of each flipped face
         rows = np.flatnonzero(flip)
         col = np.arange(verts.shape[1])[None, :]
         rev = np.where(col < nv[rows, None], nv[rows, None] - 1 - col, col)
         verts[rows] = np.take_along_axis(verts[rows], rev, axis=1)
-    internal = neighbour >= 0
-    order = np.concatenate([np.flatnonzero(internal)[np.argsort(owner[internal], kind="stable")],
-                            np.flatnonzero(~internal)])
-    verts, nv = verts[order], nv[order]
     offsets = np.zeros(order.size + 1, np.int64)
     np.cumsum(nv, out=offsets[1:])
     labels = verts[verts >= 0]

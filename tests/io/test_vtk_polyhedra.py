@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from lidarjax.io.openfoam import read_openfoam_field
-from lidarjax.io.vtk import _unique_rows, read_vtk_field
+from lidarjax.io.vtk import _sorted_rows, _unique_rows, read_vtk_field
 
 from ..helpers import DATA
 
@@ -142,17 +142,26 @@ def test_polyhedra_match_the_openfoam_cells(box):
     np.testing.assert_array_equal(box.cell_values, of.cell_values[idx].astype(np.float32))
 
 
-def test_unique_rows_is_numpys_lexicographic_unique():
+@pytest.mark.parametrize("n_points", [40, 200_000, 3_000_000, 2**40])  # 11, 3, 2, 1 ids per int64
+@pytest.mark.parametrize("rows", ["pairs", "repeats", "ties"])
+def test_unique_rows_is_numpys_lexicographic_unique(n_points, rows):
+    """Rows repeated in pairs (a valid mesh's faces), up to many times, or sharing their three
+    smallest ids while differing beyond: always `np.unique(axis=0)`'s order and groups."""
     rng = np.random.default_rng(3)
-    for n_points in (40, 3_000_000, 2**40):  # 3, 2 and 1 columns packed per int64
-        pad = rng.integers(0, min(n_points, 60), (5000, 6))
-        pad[rng.random(5000) < 0.5, 4:] = np.iinfo(np.int64).max
-        pad[:2000] = pad[rng.integers(0, 2000, 2000)]  # many repeats
-        key = np.sort(pad, axis=1)
-        order, group = _unique_rows(key, n_points)
-        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-        np.testing.assert_array_equal(group[np.argsort(order)], inverse.reshape(-1))
-        np.testing.assert_array_equal(order[np.r_[True, group[1:] != group[:-1]]], first)
+    pad = rng.integers(0, min(n_points, 60 if rows == "ties" else 10**6), (4000, 6))
+    pad[rng.random(4000) < 0.5, 4:] = -1
+    if rows == "pairs":
+        pad = rng.permutation(np.concatenate([pad[:2000], pad[:2000]]))
+    else:
+        pad[:2000] = pad[rng.integers(0, 2000, 2000)]
+    sizes = (pad >= 0).sum(1)
+    key = _sorted_rows(pad, sizes, n_points)
+    np.testing.assert_array_equal(key, np.sort(np.where(pad < 0, n_points, pad), axis=1))
+    order, group = _unique_rows(key, n_points)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    np.testing.assert_array_equal(group[np.argsort(order)], inverse.reshape(-1))
+    np.testing.assert_array_equal(order[np.r_[True, group[1:] != group[:-1]]], first)
+    np.testing.assert_array_equal(order, np.lexsort(key.T[::-1]))  # stable: row order in ties
 
 
 def _ascii_vtu(path, faces_stream):
