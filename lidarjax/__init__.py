@@ -38,6 +38,8 @@ from .batch import stack_fields as stack_fields
 from .batch import stack_mounts as stack_mounts
 from .batch import unstack_field as unstack_field
 from .batch import unstack_mounts as unstack_mounts
+from .calibrate import Calibration as Calibration
+from .calibrate import calibrate as calibrate
 from .corrections import correction_factors as correction_factors
 from .disturbed_sectors import DisturbedSector as DisturbedSector
 from .disturbed_sectors import disturbed_sectors as disturbed_sectors
@@ -45,7 +47,9 @@ from .disturbed_sectors import excluded_width as excluded_width
 from .disturbed_sectors import in_sectors as in_sectors
 from .disturbed_sectors import merge_sectors as merge_sectors
 from .field import AbstractField as AbstractField
+from .field import FieldSequence as FieldSequence
 from .field import GridField as GridField
+from .field import SnapshotField as SnapshotField
 from .flags import BLOCKING_FLAGS as BLOCKING_FLAGS
 from .flags import MIN_AVAILABILITY as MIN_AVAILABILITY
 from .flags import Flag as Flag
@@ -67,7 +71,10 @@ from .frames import rotation_y as rotation_y
 from .frames import rotation_z as rotation_z
 from .frames import tilt_rotation as tilt_rotation
 from .inverse import Inversion as Inversion
+from .inverse import JointInversion as JointInversion
 from .inverse import invert as invert
+from .inverse import invert_joint as invert_joint
+from .inverse import invert_joint_reconstructed as invert_joint_reconstructed
 from .inverse import invert_reconstructed as invert_reconstructed
 from .motion import AbstractMotion as AbstractMotion
 from .motion import SampledMotion as SampledMotion
@@ -88,9 +95,13 @@ from .progress import ProgressTask as ProgressTask
 from .progress import TextProgress as TextProgress
 from .progress import TqdmProgress as TqdmProgress
 from .progress import progress_meter as progress_meter
+from .response import AbstractProfile as AbstractProfile
 from .response import Instrument as Instrument
 from .response import PeriodicSpline as PeriodicSpline
+from .response import PowerLawProfile as PowerLawProfile
+from .response import ProfileTable as ProfileTable
 from .response import ResponseTable as ResponseTable
+from .response import UniformProfile as UniformProfile
 from .roses import CorrectionRose as CorrectionRose
 from .roses import correction_rose as correction_rose
 from .roses import sector_rose as sector_rose
@@ -155,6 +166,8 @@ from .workflows.farm_study import check_lidar_position as check_lidar_position
 from .workflows.farm_study import farm_monitor_points as farm_monitor_points
 from .workflows.farm_study import farm_study as farm_study
 from .workflows.farm_study import write_farm_study as write_farm_study
+from .workflows.joint_records import JointCorrected as JointCorrected
+from .workflows.joint_records import correct_records_joint as correct_records_joint
 from .workflows.monitor_points import MonitorPointField as MonitorPointField
 from .workflows.monitor_points import MonitorPoints as MonitorPoints
 from .workflows.monitor_points import monitor_points as monitor_points

@@ -71,6 +71,13 @@ __all__ = ["Calibration", "calibrate", "CALIBRATION_PARAMETERS"]
 #: The installation offsets `calibrate` can estimate, in this order.
 CALIBRATION_PARAMETERS = ("epsilon", "pitch", "roll")
 
+#: Largest change of (epsilon, pitch, roll) per Gauss--Newton pass, degrees (a trust region).
+_MAX_STEP = np.array([5.0, 1.0, 1.0])
+
+#: A free offset is identifiable when the normalised reduced matrix's smallest eigenvalue
+#: along it exceeds this fraction of the largest (offsets correlated beyond 0.9999 are not).
+IDENTIFIABILITY_RCOND = 1e-4
+
 _NOT_IDENTIFIABLE_EPSILON = (
     "epsilon (north offset) is not identifiable without a reference: rotating every "
     "direction by one angle fits the records equally well; give reference=(speed, direction) "
@@ -251,7 +258,8 @@ def _calibrate_core(los, w, ref_dir, hidx, rec, ctx, values, knots, free, iterat
         beta, theta = carry
         r, h_i, s_i, ainv, gb, c, ok = pieces(beta, theta)
         hmat, g = jnp.sum(h_i, 0), jnp.sum(s_i, 0)
-        dtheta = solve_theta(hmat, g)
+        # a trust region: at most 5 degrees of north offset and 1 degree of tilt per pass
+        dtheta = jnp.clip(solve_theta(hmat, g), -jnp.asarray(_MAX_STEP, dtype), jnp.asarray(_MAX_STEP, dtype))
         dbeta = jnp.einsum("nij,nj->ni", ainv, gb - jnp.einsum("nij,j->ni", c, dtheta))
         dbeta = jnp.where(ok[:, None], dbeta, 0.0)
         return (beta + dbeta, theta + dtheta), jnp.max(jnp.abs(dtheta))
@@ -283,7 +291,7 @@ def calibrate(
     *,
     weights: Float[ArrayLike, "r h b"] | None = None,
     min_beams: int = 3,
-    iterations: int = 8,
+    iterations: int = 12,
     covariance: str = "robust",
 ) -> Calibration:
     """Constant installation offsets (north offset, pitch, roll) from many records.
@@ -306,8 +314,9 @@ def calibrate(
       reference whose speed calibration differs from the lidar's cannot bias the angles.
     - `weights`: optional ``(r, h, b)`` relative inverse variances of the beams.
     - `min_beams`: fewest usable beams for a record-height to count (default 3).
-    - `iterations`: Gauss--Newton passes over the records (default 8; each pass updates
-      the offsets and every record-height's free stream).
+    - `iterations`: Gauss--Newton passes over the records (default 12; each pass updates
+      the offsets, by at most 5 degrees of epsilon and 1 degree of tilt, and every
+      record-height's free stream).
     - `covariance`: ``"robust"`` (record-clustered sandwich, default) or ``"model"``
       (``sigma**2 H^-1``); see the module docstring.
 
@@ -427,8 +436,7 @@ def calibrate(
         if ok_d.all():
             hn = hs / np.outer(d, d)
             eig, vec = np.linalg.eigh(hn)
-            rcond = 1e-8
-            weak = eig < rcond * max(eig[-1], 1e-300)
+            weak = eig < IDENTIFIABILITY_RCOND * max(eig[-1], 1e-300)
             ident[idx] = True
             for j in np.flatnonzero(weak):  # offsets along a null direction are not identified
                 ident[idx[np.abs(vec[:, j]) > 0.3]] = False

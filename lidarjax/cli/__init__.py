@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from . import calibrate as calibrate_cmd
 from . import correct, demo, farm, monitor_points, series, simulate, table
 from . import sensitivity as sensitivity_cmd
 from ._common import (
@@ -21,7 +22,8 @@ from ._common import (
 )
 
 #: The command modules, in the order `--help` lists them.
-COMMANDS = (demo, simulate, table, correct, monitor_points, sensitivity_cmd, series, farm)
+COMMANDS = (demo, simulate, table, correct, calibrate_cmd, monitor_points, sensitivity_cmd, series,
+            farm)
 
 
 def build_parser() -> argparse.ArgumentParser:

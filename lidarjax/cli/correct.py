@@ -6,7 +6,12 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
+from .._util import atomic_path
 from ..io import load_table
+from ..response import ProfileTable
+from ..workflows.joint_records import correct_records_joint
 from ..workflows.records import (
     DEFAULT_MIN_AVAILABILITY,
     check_instrument,
@@ -54,8 +59,34 @@ def register(sub) -> None:
     cor.add_argument("--allow-mismatch", action="store_true",
                      help="correct although the record header disagrees with the table (scan, "
                           "cone angle, direction offset); the mismatch is printed")
+    cor.add_argument("--joint", action="store_true",
+                     help="with a table over directions x a profile parameter (lidarjax table "
+                          "--param): solve each record over all heights at once for the "
+                          "reference-height speed, the direction and the profile parameter "
+                          "(lidarjax.invert_joint); the per-record solution is written beside "
+                          "the CSV as <out>_profile.csv. A table without a profile axis is "
+                          "corrected per height (said in one line)")
     cor.add_argument("--quiet", action="store_true", help="no progress lines")
     cor.set_defaults(func=run)
+
+
+def write_profile_csv(path, time, joint, name, profile) -> None:
+    """One row per record: reference-height speed, direction, profile parameter, their
+    standard deviations, converged and flags (`lidarjax.InverseFlag` bits)."""
+    meta = profile.metadata()
+    zref = meta.get("reference_height_m")
+    head = (f"# lidarjax correct --joint: per-record solution; profile {meta['kind']}"
+            + (f", reference height {zref:g} m" if zref is not None else "") + "\n"
+            f"time,speed_ref_m_s,direction_deg,{name},speed_std_m_s,direction_std_deg,"
+            f"{name}_std,converged,flags\n")
+    cols = [np.asarray(getattr(joint, k), np.float64) for k in
+            ("speed", "direction", "parameter", "speed_std", "direction_std", "parameter_std")]
+    conv, flags = np.asarray(joint.converged), np.asarray(joint.flags)
+    lines = [",".join([str(t)] + [f"{c[i]:.6g}" for c in cols] + [str(bool(conv[i])),
+                                                                 str(int(flags[i]))])
+             for i, t in enumerate(np.asarray(time))]
+    with atomic_path(Path(path)) as tmp:
+        Path(tmp).write_text(head + "\n".join(lines) + "\n")
 
 
 def run(args) -> int:
@@ -102,8 +133,19 @@ def run(args) -> int:
     tilt = tilt_difference(meta, rec)
     if tilt:
         say(tilt)
-    result = correct_records(table, records, records=rec, noise=args.noise,
-                             progress=progress, scan_period_s=args.scan_period)
+    joint = None
+    if args.joint:
+        done = correct_records_joint(table, records, records=rec, noise=args.noise,
+                                     progress=progress)
+        if done.note:
+            say(done.note)
+        result, joint = done.corrected, done.joint
+    elif isinstance(table, ProfileTable):
+        raise ValueError(f"--table {args.table} is a table over directions x {table.name}; "
+                         "correct it with --joint")
+    else:
+        result = correct_records(table, records, records=rec, noise=args.noise,
+                                 progress=progress, scan_period_s=args.scan_period)
     if result.record_only_heights:
         say("the table has no heights " + ", ".join(f"{h:g}" for h in result.record_only_heights)
             + " m of the record; those are not corrected (lidarjax table --heights-from "
@@ -117,6 +159,10 @@ def run(args) -> int:
                                                  if rec.kind != "rtd" else "spare beams")}
     write_corrected_csv(out, result, info, progress=progress)
     written = [str(out)]
+    if joint is not None:
+        prof = out.with_name(out.stem + "_profile.csv")
+        write_profile_csv(prof, result.time, joint, table.name, table.profile)
+        written.append(str(prof))
     if nc is not None:
         write_corrected_netcdf(nc, result, info)
         written.append(str(nc))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+import copy
 import math
 import os
 import sys
@@ -10,8 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from .._util import format_number
 from ..io import read_settings, save_table
 from ..io.fields import check_field_file, load_field
+from ..response import PowerLawProfile, UniformProfile
 from ..workflows.records import check_instrument, load_records
 from ..workflows.seed_tables import build_table, table_region
 from ._common import (
@@ -49,10 +53,79 @@ def register(sub) -> None:
                      help="with --heights-from: take --pitch and --roll from the record "
                           "header's PitchAngle and RollAngle (taken in lidarjax's convention: "
                           "positive pitch raises the S0 side, positive roll lowers S1)")
+    tab.add_argument("--param", type=parameter_values, default=None, metavar="NAME=V1,V2,...",
+                     help="runs over directions x one inflow-profile parameter, e.g. "
+                          "alpha=0.0,0.1,0.2 with --field 'runs/d{beta}_a{alpha}.npz': a "
+                          "ProfileTable for `correct --joint` (each run's --u-ref is its free "
+                          "stream at --reference-height)")
+    tab.add_argument("--profile", choices=("power", "uniform"), default=None,
+                     help="with --param: the free-stream profile the parameter sets: power "
+                          "((z/zref)^NAME, a shear exponent; the default for alpha/shear) or "
+                          "uniform (the parameter changes only the distortion)")
+    tab.add_argument("--reference-height", type=float, default=None, metavar="M",
+                     help="with --profile power: height (m above the lidar) where the runs' "
+                          "--u-ref is the free stream")
     tab.add_argument("--out", required=True, help="table file to write (.npz); an existing "
                      "file is replaced atomically, an input never")
     add_dask_arguments(tab)
     tab.set_defaults(func=run)
+
+
+def parameter_values(text: str) -> tuple[str, list[float]]:
+    """``NAME=V1,V2,...`` -> ``(name, values)``: an identifier and two or more finite
+    increasing numbers."""
+    name, sep, rest = text.partition("=")
+    name = name.strip()
+    try:
+        values = [float(v) for v in rest.split(",") if v.strip()]
+    except ValueError:
+        values = []
+    if not sep or not name.isidentifier() or name == "beta" or len(values) < 2 or not all(
+            math.isfinite(v) for v in values) or bool(np.any(np.diff(values) <= 0)):
+        raise argparse.ArgumentTypeError(
+            f"expected NAME=V1,V2,... with a name other than beta and at least two increasing "
+            f"numbers (e.g. alpha=0.0,0.1,0.2), got {text!r}")
+    return name, values
+
+
+def _profile(args):
+    """The `AbstractProfile` of --profile / --reference-height (--param given)."""
+    name = args.param[0]
+    kind = args.profile or ("power" if name.lower() in ("alpha", "shear", "shear_exponent")
+                            else "uniform")
+    if kind == "uniform":
+        return UniformProfile()
+    z = args.reference_height
+    if z is None or not (math.isfinite(z) and z > 0):
+        raise ValueError(f"--param {name} with a power-law profile needs --reference-height M "
+                         "(positive, m above the lidar: where the runs' --u-ref is the free "
+                         "stream), or --profile uniform")
+    return PowerLawProfile(z)
+
+
+def _profile_paths(args, betas):
+    """``{(beta, value): path}`` for --param runs: '{NAME}' and '{beta}' in --field."""
+    name, values = args.param
+    token = "{" + name + "}"
+    if token not in args.field:
+        raise ValueError(f"--field {args.field!r} must contain '{token}' to name the run of "
+                         f"each {name} value (e.g. 'runs/d{{beta}}_{name[0]}{token}.npz')")
+    out = {}
+    for v in values:
+        sub = copy.copy(args)
+        sub.field = args.field.replace(token, format_number(v))
+        out.update({(b, v): p for b, p in field_paths(sub, betas).items()})
+    return out
+
+
+class _ProfileLoader:
+    """``(beta, value) -> GridField`` through one region loader per value (picklable)."""
+
+    def __init__(self, loaders):
+        self.loaders = loaders
+
+    def __call__(self, beta, value):
+        return self.loaders[value](beta)
 
 
 def _tilt_from(args, rec) -> None:
@@ -93,7 +166,8 @@ def table_metadata(args, settings, scan, paths, heights) -> dict:
         "tilt_compensation": bool(args.tilt_compensation),
         "heights_m": [float(h) for h in heights],
         "settings": os.path.abspath(args.settings), "field": args.field,
-        "cfd_files": {f"{b:g}": os.path.abspath(p) for b, p in paths.items()},
+        "cfd_files": {(f"{k:g}" if not isinstance(k, tuple) else f"{k[0]:g}_{k[1]:g}"):
+                      os.path.abspath(p) for k, p in paths.items()},
         "u_ref_cfd_m_s": list(args.u_ref),
         "lidarjax_version": __version__,
     }
@@ -102,11 +176,17 @@ def table_metadata(args, settings, scan, paths, heights) -> dict:
 def run(args) -> int:
     settings = read_settings(args.settings)
     betas = [float(b) for b in settings.betas]
-    paths = field_paths(args, betas)
+    if args.param is None:
+        if args.profile is not None or args.reference_height is not None:
+            raise ValueError("--profile and --reference-height need --param NAME=V1,V2,...")
+        paths = field_paths(args, betas)
+        profile = None
+    else:
+        paths = _profile_paths(args, betas)
+        profile = _profile(args)
     scan = make_scan(args.scan, args.cone_angle, tilt_compensation=args.tilt_compensation)
     probe = make_probe(args)
-    inputs = [("settings", args.settings)] + [(f"--field (beta {b:g})", p)
-                                               for b, p in paths.items()]
+    inputs = [("settings", args.settings)] + [(f"--field ({k})", p) for k, p in paths.items()]
     rec = None
     if args.heights_from is not None:
         inputs.append(("--heights-from", args.heights_from))
@@ -134,15 +214,25 @@ def run(args) -> int:
     print(f"simulating {len(betas)} CFD runs x {settings.nh} heights ({args.scan}, "
           f"{args.probe} probe) ...", file=sys.stderr)
     with dask_client(args) as client:
-        table, _ = build_table(settings, betas, region_loader(load_field, paths, region), scan,
-                               u_ref=args.u_ref, probe=probe, pitch=args.pitch, roll=args.roll,
-                               client=client, progress=True)
+        if args.param is None:
+            table, _ = build_table(settings, betas, region_loader(load_field, paths, region),
+                                   scan, u_ref=args.u_ref, probe=probe, pitch=args.pitch,
+                                   roll=args.roll, client=client, progress=True)
+        else:
+            name, values = args.param
+            loaders = {v: region_loader(load_field, {b: paths[(b, v)] for b in betas}, region)
+                       for v in values}
+            table, _ = build_table(settings, betas, _ProfileLoader(loaders), scan,
+                                   u_ref=args.u_ref, probe=probe, pitch=args.pitch,
+                                   roll=args.roll, client=client, progress=True,
+                                   parameter=(name, values), profile=profile)
     save_table(out, table, meta)
-    bad = np.isnan(np.asarray(table.response)).all(axis=0)
+    bad = ~np.asarray(table.valid)
     note = ""
     if bad.any():
         note = (f"; {int(bad.sum())} height-beams are outside the CFD grid or in a solid "
                 "for every run (missing beams)")
-    print(f"response table: {table.n_directions} directions x {table.n_heights} heights x "
-          f"{table.n_beams} beams -> {out}{note}")
+    axis = "" if args.param is None else f" x {table.n_parameters} {table.name} values"
+    print(f"response table: {table.n_directions} directions{axis} x {table.n_heights} heights "
+          f"x {table.n_beams} beams -> {out}{note}")
     return 0

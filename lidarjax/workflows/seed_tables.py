@@ -25,7 +25,7 @@ from ..forward import Simulation, simulate
 from ..io.settings import Settings
 from ..mount import Mount
 from ..progress import AbstractProgress, LineProgress, progress_meter
-from ..response import ResponseTable
+from ..response import ProfileTable, ResponseTable
 
 __all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "settings_mount",
            "settings_mounts", "SEED_U_REF"]
@@ -158,6 +158,8 @@ def build_table(
     roll: float = 0.0,
     client=None,
     progress: bool | AbstractProgress = False,
+    parameter: tuple[str, Sequence[float]] | None = None,
+    profile=None,
 ):
     """A `lidarjax.ResponseTable` from the CFD runs of a seed settings file.
 
@@ -182,7 +184,24 @@ def build_table(
     - `progress`: ``True``: one line per finished run on stderr (run, beta, grid before and
       after the crop, seconds; `lidarjax.progress.LineProgress`), or a `lidarjax.progress`
       meter.
+    - `parameter`: ``(name, values)`` for runs over directions x one inflow-profile
+      parameter (e.g. ``("alpha", [0.0, 0.1, 0.2])``): `field_for_beta` then takes
+      ``(beta, value)``, each run's `u_ref` is its free stream at the profile's reference
+      height, and the result is a `lidarjax.ProfileTable` (responses divided by `profile`,
+      a `lidarjax.AbstractProfile`, default `lidarjax.UniformProfile`) with sims keyed
+      ``(beta, value)``.
     """
+    if parameter is not None:
+        name, values = parameter
+        tables, all_sims = [], {}
+        for v in [float(x) for x in values]:
+            t, s = build_table(settings, betas, _AtValue(field_for_beta, v), scan, u_ref=u_ref,
+                               probe=probe, pitch=pitch, roll=roll, client=client,
+                               progress=progress)
+            tables.append(t)
+            all_sims.update({(b, v): sim for b, sim in s.items()})
+        return ProfileTable(name, [float(x) for x in values], tables, profile=profile,
+                            per_reference_speed=True), all_sims
 
     betas = [float(b) for b in betas]
     mounts = list(settings_mount(settings, betas, pitch=pitch, roll=roll))  # one per run
@@ -232,6 +251,16 @@ def table_region(settings: Settings, betas: Sequence[float], scan, *, probe=None
 
     mount = settings_mount(settings, [float(b) for b in betas], pitch=pitch, roll=roll)
     return scan_bounds(scan, mount, np.asarray(settings.heights()), probe=probe)
+
+
+class _AtValue:
+    """``field_for_beta`` of one profile-parameter value (picklable for dask)."""
+
+    def __init__(self, field_for_run, value):
+        self.field_for_run, self.value = field_for_run, value
+
+    def __call__(self, beta):
+        return self.field_for_run(beta, self.value)
 
 
 class _TableRun:

@@ -1,0 +1,177 @@
+"""`lidarjax calibrate`: installation offsets (north offset, pitch, roll) from LOS records."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from .._util import atomic_path
+from ..calibrate import CALIBRATION_PARAMETERS, calibrate
+from ..io import load_table
+from ..response import ProfileTable
+from ..workflows.records import (
+    DEFAULT_MIN_AVAILABILITY,
+    load_records,
+    match_heights,
+    subset_table,
+)
+from ._common import check_output_file, finite_float
+
+
+def _wrt(text: str) -> tuple[str, ...]:
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    bad = [x for x in names if x not in CALIBRATION_PARAMETERS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(f"expected a comma list of {','.join(CALIBRATION_PARAMETERS)}"
+                                         f", got {text!r}")
+    return names
+
+
+def register(sub) -> None:
+    cal = sub.add_parser(
+        "calibrate", help="estimate the installation's north offset and tilt from LOS records",
+        description="Fit constant offsets of the installation (epsilon: north offset, pitch, "
+                    "roll; degrees) to many raw LOS records (.rtd) through the table's forward "
+                    "model, with standard errors and correlations. Without --reference only "
+                    "pitch and roll are identifiable (from the vertical beam and how the "
+                    "apparent vertical wind follows the direction); epsilon needs a reference "
+                    "free stream (mast, other lidar, model). The estimate is compared with the "
+                    "tilt in the record header where it has one.",
+        epilog="example: lidarjax calibrate --table site_table.npz --records wls.rtd "
+               "--reference mast.csv --out calibration.json")
+    cal.add_argument("--table", required=True, help="response table from `lidarjax table` "
+                     "(built with the nominal installation)")
+    cal.add_argument("--records", required=True, nargs="+",
+                     help="raw LOS record files (.rtd); several files are pooled")
+    cal.add_argument("--reference", default=None,
+                     help="CSV of the reference free stream, columns time,height_m,speed_m_s,"
+                          "direction_deg (time as in the records, end of interval, UTC)")
+    cal.add_argument("--wrt", type=_wrt, default=CALIBRATION_PARAMETERS,
+                     help="offsets to estimate (default epsilon,pitch,roll)")
+    cal.add_argument("--period", default="10min",
+                     help="averaging interval of the raw records (default 10min; shorter "
+                          "intervals give more records from a short file)")
+    cal.add_argument("--parameter", type=finite_float, default=None,
+                     help="for a table over a profile parameter: the value to calibrate at "
+                          "(default the middle of its range)")
+    cal.add_argument("--min-availability", type=finite_float, default=None,
+                     help="records below this availability (percent) are not used (default 80)")
+    cal.add_argument("--out", default=None, help="write the result as JSON")
+    cal.set_defaults(func=run)
+
+
+def _reference(path: Path, times: np.ndarray, heights: np.ndarray):
+    """``(speed, direction)`` ``(r, h)`` from a long-format CSV, NaN where absent."""
+    if not path.is_file():
+        raise FileNotFoundError(f"--reference: file not found: {path}")
+    speed = np.full((times.size, heights.size), np.nan)
+    direction = np.full((times.size, heights.size), np.nan)
+    index = {np.datetime64(t, "s"): i for i, t in enumerate(times)}
+    with open(path, newline="") as fh:
+        rows = csv.DictReader(line for line in fh if not line.startswith("#"))
+        need = {"time", "height_m", "speed_m_s", "direction_deg"}
+        if rows.fieldnames is None or not need <= set(rows.fieldnames):
+            raise ValueError(f"--reference {path}: expected columns {','.join(sorted(need))}")
+        for k, row in enumerate(rows, 2):
+            try:
+                t = np.datetime64(row["time"].strip().replace(" ", "T"), "s")
+                z = float(row["height_m"])
+                s, d = float(row["speed_m_s"]), float(row["direction_deg"])
+            except ValueError:
+                raise ValueError(f"--reference {path}, line {k}: unreadable row") from None
+            i = index.get(t)
+            j = int(np.argmin(np.abs(heights - z)))
+            if i is not None and abs(heights[j] - z) <= 0.5:
+                speed[i, j], direction[i, j] = s, d
+    return speed, direction
+
+
+def run(args) -> int:
+    def say(text):
+        print(f"lidarjax calibrate: {text}", file=sys.stderr)
+
+    if not Path(args.table).is_file():
+        raise FileNotFoundError(f"--table: table file not found: {args.table}")
+    files = [Path(r) for r in args.records]
+    for f in files:
+        if not f.is_file():
+            raise FileNotFoundError(f"--records: record file not found: {f}")
+    if args.out is not None:
+        check_output_file(Path(args.out), inputs=[("--table", args.table)] + [
+            ("--records", f) for f in files])
+    table, meta = load_table(args.table, return_metadata=True)
+    if isinstance(table, ProfileTable):
+        value = args.parameter if args.parameter is not None else float(
+            0.5 * (table.parameters[0] + table.parameters[-1]))
+        say(f"table over {table.name}: calibrating at {table.name} = {value:g}")
+        table = table.at(value)
+    min_avail = DEFAULT_MIN_AVAILABILITY if args.min_availability is None else \
+        args.min_availability
+    los, times, heights, header = [], [], None, {}
+    for f in files:
+        rec = load_records(f, period=args.period, min_availability=min_avail)
+        if rec.kind != "rtd" or rec.los is None:
+            raise ValueError(f"--records {f}: calibration needs raw LOS records (.rtd); a "
+                             f"{rec.kind} file reports reconstructed winds only")
+        ti, ri, _, _ = match_heights(table.heights, rec.heights)
+        if ti.size == 0:
+            raise ValueError(f"--records {f}: none of the table's heights is in the file")
+        if heights is not None and not np.array_equal(ti, heights[0]):
+            raise ValueError(f"--records {f}: other heights than {files[0]}")
+        heights = (ti, ri)
+        los.append(np.asarray(rec.los)[:, ri, : table.n_beams])
+        times.append(np.asarray(rec.time))
+        for k in ("pitch", "roll"):
+            v = float(getattr(rec, k))
+            if math.isfinite(v):
+                header.setdefault(k, v)
+    ti, ri = heights
+    sub = subset_table(table, ti)
+    los = np.concatenate(los)
+    times = np.concatenate(times)
+    z = np.asarray(sub.heights, np.float64)
+    reference = None
+    if args.reference is not None:
+        reference = _reference(Path(args.reference), times, z)
+        matched = int(np.isfinite(reference[1]).sum())
+        say(f"reference: {matched} of {reference[1].size} record-heights matched")
+
+    # what calibrate reads: the LOS and the header's tilt
+    recs = SimpleNamespace(los=los, pitch=header.get("pitch", math.nan),
+                           roll=header.get("roll", math.nan))
+    result = calibrate(recs, sub, wrt=args.wrt, reference=reference)
+    print(f"calibration from {result.n_records} records x {sub.n_heights} heights "
+          f"({result.n_problems} record-heights used); LOS residual {float(result.noise):.3f} m/s")
+    for line in result.summary():
+        print(line)
+    if header:
+        print("header tilt: " + ", ".join(f"{k} {v:g} deg" for k, v in header.items())
+              + " (PitchAngle/RollAngle read in lidarjax's convention; the files do not "
+                "state theirs)")
+    if args.out is not None:
+        doc = {
+            "table": str(args.table), "records": [str(f) for f in files],
+            "reference": args.reference, "heights_m": [float(v) for v in z],
+            "names": list(result.names),
+            "offset_deg": [float(v) for v in np.asarray(result.offset)],
+            "value_deg": [float(v) for v in np.asarray(result.value)],
+            "nominal_deg": [float(v) for v in np.asarray(result.nominal)],
+            "std_deg": [float(v) for v in np.asarray(result.std)],
+            "correlation": np.asarray(result.correlation).tolist(),
+            "identifiable": [bool(v) for v in np.asarray(result.identifiable)],
+            "header_deg": [float(v) for v in np.asarray(result.header)],
+            "n_records": result.n_records, "n_problems": result.n_problems,
+            "noise_m_s": float(result.noise), "converged": result.converged,
+            "notes": list(result.notes),
+        }
+        with atomic_path(Path(args.out)) as tmp:
+            Path(tmp).write_text(json.dumps(doc, indent=1, allow_nan=True) + "\n")
+        print(f"wrote {args.out}")
+    return 0
