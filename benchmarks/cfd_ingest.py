@@ -17,7 +17,16 @@ Two workloads, each loaded in a fresh subprocess (so peak memory is that of one 
    18k-cell cut: load time of a Windcube's region and LOS difference to OpenFOAM's own probes
    (`interpolationScheme cellPoint`).
 
-Writes benchmarks/results/cfd_ingest.{json,png,md}. `--quick` runs only the 1e5 mesh.
+3. `.vtu` against the OpenFOAM case it was exported from (`--vtk-case`, the v1912
+   `windAroundBuildings` tutorial run, see tests/data/openfoam/README.md, and its
+   `foamToVTK -latestTime` internal mesh): for the `roof` and `street` Windcube V2 of that
+   case (region = `scan_bounds`), the read (`read_openfoam_field` / `read_vtk_field`) and the
+   resampling (`resample_openfoam`, as `load_field` does) timed side by side, interleaved, in
+   fresh processes, medians of `--repeats`; optionally (`--vtk-baseline REV`) the `.vtu`
+   reader of an older git revision, whose grids must equal today's bitwise.
+
+Writes benchmarks/results/cfd_ingest.{json,png,md}. `--quick` runs only the 1e5 mesh;
+`--vtk-only` runs only workload 3 and writes benchmarks/results/cfd_ingest_vtk.{json,md}.
 """
 
 from __future__ import annotations
@@ -175,6 +184,168 @@ print("RESULT" + json.dumps(out))
 """
 
 
+VTK_CHILD = r"""
+import json, sys, time, importlib.util
+import numpy as np
+sys.path.insert(0, {root!r})
+import jax
+jax.config.update("jax_enable_x64", True)
+import lidarjax as lj
+from lidarjax.io.openfoam import read_openfoam_field, resample_openfoam
+from lidarjax.io.vtk import read_vtk_field
+mode, path, out_npz = {mode!r}, {path!r}, {out_npz!r}
+lo, hi = np.array({lo!r}), np.array({hi!r})
+if mode == "openfoam":
+    reader = read_openfoam_field
+elif mode == "vtk":
+    reader = read_vtk_field
+else:  # the reader of an older revision, saved as a module file
+    spec = importlib.util.spec_from_file_location("lidarjax.io._vtk_baseline", mode)
+    old = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = old
+    spec.loader.exec_module(old)
+    reader = old.read_vtk_field
+t0 = time.perf_counter()
+of = reader(path)
+t1 = time.perf_counter()
+axes, vel, info = resample_openfoam(of, (lo, hi), None)
+t2 = time.perf_counter()
+if out_npz:
+    np.savez(out_npz, x=axes[0], y=axes[1], z=axes[2], velocity=vel)
+hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM")]
+print("RESULT" + json.dumps(dict(read_s=t1 - t0, resample_s=t2 - t1, load_s=t2 - t0,
+      n_cells=int(of.mesh.n_cells), n_faces=int(of.mesh.n_faces), n_cells_used=int(info["n_cells_used"]),
+      grid=list(vel.shape[:3]), peak_rss_gb=int(hwm[0].split()[1]) / 1e6 if hwm else float("nan"))))
+"""
+
+# the two Windcube V2 of the windAroundBuildings case (tests/data/openfoam/README.md)
+VTK_LIDARS = {"roof": ([96.0, 126.0, 39.0], (10.0, 95.0)), "street": ([72.0, 66.0, 1.0], (10.0, 130.0))}
+
+
+def vtk_child(mode: str, path: str, region, out_npz: str = "", timeout: float = 600.0) -> dict:
+    code = VTK_CHILD.format(root=str(ROOT), mode=mode, path=path, out_npz=out_npz,
+                            lo=[float(v) for v in region[0]], hi=[float(v) for v in region[1]])
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    try:
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                              timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"error": f"not finished after {timeout:g} s (stopped)"}
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
+    if proc.returncode != 0 or not line:
+        return {"error": (proc.stderr or proc.stdout)[-800:]}
+    return json.loads(line[-1][6:])
+
+
+def baseline_module(rev: str, tmp: Path) -> str:
+    """`lidarjax/io/vtk.py` of git revision `rev`, its relative imports made absolute."""
+    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:lidarjax/io/vtk.py"], capture_output=True,
+                         text=True, check=True).stdout
+    src = (src.replace("from .._util import", "from lidarjax._util import")
+           .replace("from ._cells import", "from lidarjax.io._cells import")
+           .replace("from .openfoam import", "from lidarjax.io.openfoam import"))
+    path = tmp / f"vtk_{rev}.py"
+    path.write_text(src)
+    return str(path)
+
+
+def run_vtk(case: Path, vtu: Path, repeats: int, baseline: str | None, baseline_repeats: int) -> dict:
+    """Workload 3: `.vtu` against the OpenFOAM case, per lidar region, medians."""
+    import lidarjax as lj
+
+    scan = lj.windcube_v2()
+    out: dict = {"case": str(case), "vtu": str(vtu), "repeats": repeats, "baseline": baseline, "lidars": {}}
+    with tempfile.TemporaryDirectory(prefix="cfd_ingest_vtk_") as tmp:
+        tmp_p = Path(tmp)
+        paths = {"openfoam": str(case), "vtk": str(vtu)}
+        if baseline:
+            paths[f"vtk@{baseline}"] = str(vtu)
+        modes = {"openfoam": "openfoam", "vtk": "vtk"}
+        if baseline:
+            modes[f"vtk@{baseline}"] = baseline_module(baseline, tmp_p)
+        # warm-up: numba's on-disk cache of the grid kernel, the page cache of both files
+        for key in ("openfoam", "vtk"):
+            vtk_child(modes[key], paths[key], ([10.0, 10.0, 10.0], [20.0, 20.0, 20.0]))
+        for lidar, (loc, (h0, h1)) in VTK_LIDARS.items():
+            mount = lj.Mount(np.array(loc), beta=0.0, gamma=0.0, psi=0.0, epsilon=0.0)
+            bounds = lj.scan_bounds(scan, mount, np.arange(h0, h1 + 1, 5.0))
+            lo, hi = (np.asarray(v, np.float64).tolist() for v in bounds)
+            runs: dict = {k: [] for k in modes}
+            for r in range(max(repeats, baseline_repeats if baseline else 0)):
+                for key in modes:  # interleaved, so that the machine's load falls on all alike
+                    if r >= (baseline_repeats if key.startswith("vtk@") else repeats):
+                        continue
+                    npz = str(tmp_p / f"{lidar}_{key.replace('@', '_')}.npz") if r == 0 else ""
+                    res = vtk_child(modes[key], paths[key], (lo, hi), npz)
+                    print(lidar, key, json.dumps(res), flush=True)
+                    runs[key].append(res)
+            entry: dict = {"region": [lo, hi]}
+            for key, rs in runs.items():
+                ok = [x for x in rs if "load_s" in x]
+                if not ok:
+                    entry[key] = {"error": rs[0].get("error", "") if rs else "not run"}
+                    continue
+                entry[key] = {f: float(np.median([x[f] for x in ok]))
+                              for f in ("read_s", "resample_s", "load_s")}
+                entry[key].update({f"{f}_all": [x[f] for x in ok] for f in ("read_s", "load_s")})
+                entry[key].update({f: ok[0][f] for f in ("n_cells", "n_faces", "n_cells_used", "grid")})
+                entry[key]["peak_rss_gb"] = float(max(x["peak_rss_gb"] for x in ok))
+            grids = {k: np.load(tmp_p / f"{lidar}_{k.replace('@', '_')}.npz") for k in modes
+                     if (tmp_p / f"{lidar}_{k.replace('@', '_')}.npz").is_file()}
+            if "vtk" in grids and "openfoam" in grids:
+                a, b = grids["vtk"]["velocity"], grids["openfoam"]["velocity"]
+                if a.shape == b.shape:
+                    both = np.isfinite(a).all(-1) & np.isfinite(b).all(-1)
+                    entry["vtk_vs_openfoam"] = {
+                        "same_nan": bool(np.array_equal(np.isnan(a).any(-1), np.isnan(b).any(-1))),
+                        "max_abs": float(np.abs(a[both] - b[both]).max()),
+                        "rms": float(np.sqrt(np.mean((a[both] - b[both]) ** 2)))}
+                else:
+                    entry["vtk_vs_openfoam"] = {"grids": [list(a.shape), list(b.shape)]}
+            if baseline and f"vtk@{baseline}" in grids and "vtk" in grids:
+                g0, g1 = grids[f"vtk@{baseline}"], grids["vtk"]
+                entry["vtk_equals_baseline_bitwise"] = bool(all(
+                    np.array_equal(g0[k], g1[k], equal_nan=True) for k in ("x", "y", "z", "velocity")))
+            out["lidars"][lidar] = entry
+    return out
+
+
+def write_vtk_md(res: dict, path: Path | None = None) -> list[str]:
+    v = res["vtk"]
+    keys = [k for k in ("openfoam", "vtk", f"vtk@{v['baseline']}") if k in next(iter(v["lidars"].values()), {})]
+    lines = ["## `.vtu` against the OpenFOAM case (windAroundBuildings, v1912 `foamToVTK -latestTime`)", "",
+             f"Machine: {machine_line(res['machine'])} (shared). Each load in a fresh process (JAX and "
+             f"lidarjax imported, not timed), paths interleaved, medians of {v['repeats']} "
+             "(the baseline: of its own repeats). read = `read_openfoam_field` / `read_vtk_field`; "
+             "resample = `resample_openfoam` on the region of the lidar's `scan_bounds` "
+             "(what `load_field(path, region=...)` does, less building the `GridField`).", "",
+             "| lidar | path | cells | faces | cells used | grid | read s | resample s | load s | peak GB |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for lidar, e in v["lidars"].items():
+        for k in keys:
+            r = e.get(k, {})
+            if "load_s" not in r:
+                lines.append(f"| {lidar} | {k} | - | - | - | - | - | - | - | {r.get('error', '')[:60]} |")
+                continue
+            lines.append(f"| {lidar} | {k} | {r['n_cells']:,} | {r['n_faces']:,} | {r['n_cells_used']:,} | "
+                         f"{'x'.join(map(str, r['grid']))} | {r['read_s']:.2f} | {r['resample_s']:.2f} | "
+                         f"{r['load_s']:.2f} | {r['peak_rss_gb']:.2f} |")
+    lines.append("")
+    for lidar, e in v["lidars"].items():
+        c = e.get("vtk_vs_openfoam", {})
+        if "max_abs" in c:
+            lines.append(f"- {lidar}: `.vtu` grid against the case's: NaN nodes the same: {c['same_nan']}; "
+                         f"max |diff| {c['max_abs']:.3g} m/s, rms {c['rms']:.3g} m/s (foamToVTK's float32 "
+                         "points and values; VTK hexahedra cut into other tetrahedra)")
+        if "vtk_equals_baseline_bitwise" in e:
+            lines.append(f"- {lidar}: grid of today's `.vtu` reader equals {v['baseline']}'s bitwise: "
+                         f"{e['vtk_equals_baseline_bitwise']}")
+    if path is not None:
+        head = "# CFD ingest: `.vtu` (benchmarks/cfd_ingest.py --vtk-only)\n\n"
+        path.write_text(head + "\n".join(lines) + "\n")
+    return lines
+
+
 def run_child(mode: str, case: str, points: str = "", probes: str = "", timeout: float | None = None) -> dict:
     code = CHILD.format(root=str(ROOT), mode=mode, case=case, location=LOCATION, heights=HEIGHTS,
                         radius=RADIUS, speed=SPEED, direction=DIRECTION, points=points, probes=probes)
@@ -201,7 +372,25 @@ def main() -> None:
     ap.add_argument("--old-timeout", type=float, default=240.0, help="seconds allowed to the old path")
     ap.add_argument("--turbine-case", default="/work/i11a_of/ts")
     ap.add_argument("--turbine-probes", default="/work/i11a_of/ts/postProcessing/probes/168/U")
+    ap.add_argument("--vtk-case", default="/work/cases/windAroundBuildings",
+                    help="windAroundBuildings case run to its latest time, with foamToVTK's output")
+    ap.add_argument("--vtu", default=None, help="default: VTK/<case>_<index>/internal.vtu of --vtk-case")
+    ap.add_argument("--vtk-only", action="store_true", help="only the .vtu vs OpenFOAM workload")
+    ap.add_argument("--repeats", type=int, default=5, help="loads per path and lidar (.vtu workload)")
+    ap.add_argument("--vtk-baseline", default=None, help="git revision whose .vtu reader is timed too")
+    ap.add_argument("--baseline-repeats", type=int, default=3)
     args = ap.parse_args()
+    vcase = Path(args.vtk_case)
+    vtu = Path(args.vtu) if args.vtu else next(iter(sorted(vcase.glob("VTK/*/internal.vtu"))), None)
+    if args.vtk_only:
+        if vtu is None or not vtu.is_file():
+            raise SystemExit(f"no .vtu: run foamToVTK -latestTime in {vcase} or give --vtu")
+        res = {"machine": machine(), "vtk": run_vtk(vcase, vtu, args.repeats, args.vtk_baseline,
+                                                     args.baseline_repeats)}
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        (RESULTS / "cfd_ingest_vtk.json").write_text(json.dumps(res, indent=1))
+        write_vtk_md(res, RESULTS / "cfd_ingest_vtk.md")
+        return
     sizes = args.sizes or ([1e5] if args.quick else [1e5, 1e6, 5e6])
     results: dict = {"hemisphere": [], "turbineSiting": None, "machine": machine()}
     data = ROOT / "tests" / "data" / "openfoam"
@@ -233,6 +422,8 @@ def main() -> None:
             "turbine", str(data / "turbineSiting_cut"), str(data / "turbineSiting_points.csv"),
             str(data / "turbineSiting_cut" / "postProcessing" / "probes" / "168" / "U"))}
     print(json.dumps(results["turbineSiting"]), flush=True)
+    if vtu is not None and vtu.is_file():
+        results["vtk"] = run_vtk(vcase, vtu, args.repeats, args.vtk_baseline, args.baseline_repeats)
     RESULTS.mkdir(parents=True, exist_ok=True)
     name = "cfd_ingest_quick" if args.quick else "cfd_ingest"
     (RESULTS / f"{name}.json").write_text(json.dumps(results, indent=1))
@@ -267,6 +458,8 @@ def write_md(res: dict, path: Path) -> None:
             grid = "x".join(map(str, v["grid"]))
             lines.append(f"| {k} | {v['n_cells']:,} | {v['n_cells_used']:,} | {grid} | "
                          f"{v['load_s']:.1f} | {v['los_rms']:.4f} | {v['los_max']:.4f} |")
+    if res.get("vtk"):
+        lines += [""] + write_vtk_md(res)
     path.write_text("\n".join(lines) + "\n")
 
 

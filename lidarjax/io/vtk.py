@@ -42,6 +42,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import os
+import re
 import xml.etree.ElementTree as ET
 import zlib
 from pathlib import Path
@@ -363,8 +364,21 @@ class _VtuReader:
             if self.appended_b64:
                 self.appended = self.appended.strip()
             data = data[:k] + b"</VTKFile>"
+        # the XML tree is parsed without the arrays' text (most of the file): each inline
+        # DataArray keeps the span of its text in `data`, read when the array is decoded
+        self.data, self.spans, parts, pos = data, [], [], 0
+        for m in re.finditer(rb"<DataArray\b[^>]*>", data):
+            if m.group().endswith(b"/>") or m.start() < pos:
+                continue
+            end = data.find(b"</DataArray>", m.end())
+            if end < 0:
+                break
+            parts += [data[pos: m.end() - 1], b" lidarjax_text='%d'>" % len(self.spans)]
+            self.spans.append((m.end(), end))
+            pos = end
+        parts.append(data[pos:])
         try:
-            self.root = ET.fromstring(data)
+            self.root = ET.fromstring(b"".join(parts))
         except ET.ParseError as err:
             raise ValueError(f"{os.fspath(path)}: not a readable VTK XML file ({err})") from None
         if self.root.get("type") != "UnstructuredGrid":
@@ -408,10 +422,13 @@ class _VtuReader:
         if self.big:
             dtype = dtype.newbyteorder(">")
         fmt = el.get("format", "ascii")
+        span = el.get("lidarjax_text")
+        text = (el.text or "").encode() if span is None else self.data[slice(*self.spans[int(span)])]
         if fmt == "ascii":
-            a = np.array((el.text or "").split(), dtype=np.float64).astype(dtype)
+            a = np.array(text.decode().split(), dtype=np.float64).astype(dtype)
         elif fmt == "binary":
-            a = self._b64_blocks("".join((el.text or "").split()).encode(), dtype)
+            # base64 decoding skips whitespace; the compressed layout needs it removed first
+            a = self._b64_blocks(text.translate(None, b" \t\r\n") if self.compressed else text, dtype)
         elif fmt == "appended":
             off = int(el.get("offset"))
             if self.appended_b64:

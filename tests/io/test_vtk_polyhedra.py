@@ -210,3 +210,21 @@ def test_truncated_polyhedron_stream_is_refused(tmp_path, cut):
     path = _ascii_vtu(tmp_path / "bad.vtu", lambda c: _cube_faces(c)[:-cut])
     with pytest.raises(ValueError, match="bad.vtu: the polyhedron face stream"):
         read_vtk_field(path)
+
+
+@pytest.mark.parametrize("binary, compression", [(True, "zlib"), (True, None), (False, None)])
+def test_other_encodings_read_the_same(tmp_path, binary, compression):
+    """The foamToVTK hexahedra of tests/data/vtk_hole rewritten by meshio: zlib-compressed
+    base64, plain base64 (UInt32 headers) and ascii give the same mesh and values."""
+    meshio = pytest.importorskip("meshio")
+    src = DATA / "vtk_hole" / "hole_0" / "internal.vtu"
+    ref = read_vtk_field(src)
+    a = _raw_arrays(src)
+    m = meshio.Mesh(a["Points", "Points"], [("hexahedron", a["Cells", "connectivity"].reshape(-1, 8))],
+                    point_data={"U": a["PointData", "U"]}, cell_data={"U": [a["CellData", "U"]]})
+    m.write(tmp_path / "h.vtu", binary=binary, compression=compression)
+    got = read_vtk_field(tmp_path / "h.vtu")
+    for name in ("points", "face_offsets", "face_labels", "owner", "neighbour"):
+        np.testing.assert_array_equal(getattr(got.mesh, name), getattr(ref.mesh, name))
+    np.testing.assert_array_equal(got.cell_values, ref.cell_values)
+    np.testing.assert_array_equal(got.point_values, ref.point_values)
