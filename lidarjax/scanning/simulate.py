@@ -23,7 +23,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._precision import difference, is_concrete
-from ..field import AbstractField
+from ..field import AbstractField, DirectSampler
 from ..flags import Flag
 from ..forward import _beam_los
 from ..frames import body_to_cfd_rotation, rotate
@@ -147,7 +147,9 @@ def _core(field, pattern, mount, probe, start, n_scans):
     r, k, g = pattern.n_rays, pattern.n_sub, pattern.n_gates
     to_cfd = body_to_cfd_rotation(mount_d)
     n_cfd = rotate(to_cfd, pattern.sub_directions().reshape(r * k, 3))  # (B, 3)
-    ranges = jnp.broadcast_to(pattern.ranges[:, None], (g, r * k))
+    # every ray has the same gates: the probe's nodes are computed once per gate, (g, 1),
+    # and broadcast over the rays by `_beam_los` (its points are (g, B, q, 3))
+    ranges = pattern.ranges[:, None]
     if n_scans is None:
         los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)
         times = start + pattern.ray_times()
@@ -157,7 +159,13 @@ def _core(field, pattern, mount, probe, start, n_scans):
 
         def los_at(pts, dirs):
             t = t_sub[..., None] if pts.ndim == 4 else t_sub
-            return field.time_sampler(pts, dirs, n_times=n_scans)(t)
+            sampler = field.time_sampler(pts, dirs, n_times=n_scans)
+            if isinstance(sampler, DirectSampler):
+                # no preparation pays: sample directly with times that broadcast (one per
+                # sub-ray), so per-time work (frozen turbulence's advected distance) is done
+                # per sub-ray, not per probe node
+                return field.los_local_at(pts, dirs, t)
+            return sampler(t)
 
         los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)
         times = start + scans[:, :, 0] + pattern.ray_times()[None]
@@ -165,7 +173,7 @@ def _core(field, pattern, mount, probe, start, n_scans):
     los = jnp.swapaxes(los, -1, -2)  # (..., r, g)
     flags = jnp.where(jnp.isfinite(los), 0, int(Flag.BEAM_OUTSIDE))
     if truncated is not None:
-        cut = jnp.any(truncated.reshape(g, r, k), axis=-1).T  # (r, g)
+        cut = jnp.any(jnp.broadcast_to(truncated, (g, r * k)).reshape(g, r, k), axis=-1).T
         flags = flags | jnp.where(cut, int(Flag.PROBE_TRUNCATED), 0)
     n_mid = rotate(to_cfd, pattern.directions())
     points = (field.origin + (origin_local + pattern.ranges[None, :, None] * n_mid[:, None, :])

@@ -1,0 +1,51 @@
+"""`lidarjax scan`: presets and real scan files through the command line, CF NetCDF out,
+the PPI/RHI plot, one-line refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import lidarjax as lj
+from lidarjax.cli import main
+from lidarjax.io import read_scan_netcdf
+
+from ..helpers import DATA
+
+pytest.importorskip("xarray")
+
+
+def test_ppi_preset_written_and_equal_to_the_api(tmp_path, capsys):
+    out, png = tmp_path / "ppi.nc", tmp_path / "ppi.png"
+    rc = main(["scan", "ppi", "--elevation", "4", "--n-rays", "12", "--gates", "10", "--wind", "8,250",
+               "--point-probe", "--out", str(out), "--plot", str(png)])
+    assert rc == 0 and png.stat().st_size > 0
+    back = read_scan_netcdf(out)
+    p = lj.ppi(4.0, lj.gate_ranges(10, 30.0), n_rays=12)
+    ref = lj.simulate_scan(lj.scenes.uniform(8.0, 250.0), p, lj.Mount([0.0, 0.0, 0.0]))
+    np.testing.assert_allclose(back["radial_velocity"][0], np.asarray(ref.los), atol=1e-12)
+    assert "12 rays x 10 gates" in capsys.readouterr().out
+
+
+def test_scan_file_layout_series_and_rhi_plot(tmp_path):
+    out = tmp_path / "vad.nc"
+    hpl = DATA / "scanning" / "VAD_194_20210624_170110_cut.hpl"
+    assert main(["scan", str(hpl), "--scans", "2", "--out", str(out)]) == 0
+    back = read_scan_netcdf(out)
+    assert back["radial_velocity"].shape == (2, 2, 40)
+    np.testing.assert_allclose(back["range"], lj.io.read_hpl(hpl).ranges)
+    png = tmp_path / "rhi.png"
+    assert main(["scan", "rhi", "--azimuth", "30", "--n-rays", "6", "--gates", "5",
+                 "--out", str(tmp_path / "rhi.nc"), "--plot", str(png)]) == 0
+    assert png.stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["scan", "spiral"], "neither a preset"),
+    (["scan", "ppi", "--n-rays", "0"], "positive integer"),
+    (["scan", "ppi", "--wind", "8"], "SPEED,DIRECTION"),
+])
+def test_bad_arguments_one_line(tmp_path, capsys, argv, text):
+    rc = main(argv + ["--out", str(tmp_path / "x.nc")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and text in err and "\n" not in err
