@@ -26,7 +26,8 @@ from .._precision import difference, is_concrete
 from ..field import AbstractField, DirectSampler
 from ..flags import Flag
 from ..forward import _beam_los
-from ..frames import body_to_cfd_rotation, rotate
+from ..frames import body_to_cfd_rotation, lidar_to_cfd_rotation, rotate
+from ..motion import AbstractMotion
 from ..mount import Mount
 from ..probe import AbstractProbe, PointProbe, probe_for_ranges
 from .pattern import ScanPattern
@@ -110,7 +111,8 @@ def simulate_scan(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
 
 def simulate_scan_series(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
                          n_scans: int = 1, start: Float[ArrayLike, ""] = 0.0,
-                         probe: AbstractProbe | None = None) -> ScanResult:
+                         probe: AbstractProbe | None = None,
+                         motion: AbstractMotion | None = None) -> ScanResult:
     """Fly `n_scans` repetitions of `pattern` (every `ScanPattern.period` from `start`, s)
     through a time-dependent `field`: every sub-ray samples the field at its own time
     (`AbstractField.los_local_at`), so a moving beam averages over its swept arc *and* over
@@ -122,8 +124,14 @@ def simulate_scan_series(field: AbstractField, pattern: ScanPattern, mount: Moun
     different rays (a trajectory that never repeats), put them in one long pattern
     (`ScanPattern.repeated` or your own) with ``n_scans=1``.
 
-    **Arguments:** as `simulate_scan`, plus `n_scans` (static: shapes). **Returns:** a
-    `ScanResult` with `los` and `flags` ``(n, r, g)`` and `times` ``(n, r)``.
+    With a platform `motion` (`lidarjax.SinusoidalMotion`, `lidarjax.SampledMotion`), every
+    sub-ray has the mount of its own time (offset, and attitude added to the mount's pitch,
+    roll and ``gamma`` for yaw, as `lidarjax.simulate_series` does) and its LOS is the
+    field's minus the lidar's own velocity along the beam; `points` and `directions` stay
+    those of the mount at rest.
+
+    **Arguments:** as `simulate_scan`, plus `n_scans` (static: shapes) and `motion`.
+    **Returns:** a `ScanResult` with `los` and `flags` ``(n, r, g)`` and `times` ``(n, r)``.
     """
     probe = PointProbe() if probe is None else probe
     _validate("simulate_scan_series", field, pattern, mount, probe)
@@ -131,12 +139,40 @@ def simulate_scan_series(field: AbstractField, pattern: ScanPattern, mount: Moun
         raise ValueError(f"simulate_scan_series: n_scans must be a positive integer, got {n_scans!r}.")
     if is_concrete(start) and not np.isfinite(np.asarray(start, np.float64)).all():
         raise ValueError(f"simulate_scan_series: `start` must be finite seconds, got {start!r}.")
+    if motion is not None and not isinstance(motion, AbstractMotion):
+        raise ValueError(f"simulate_scan_series: `motion` must be a lidarjax motion (SinusoidalMotion, "
+                         f"SampledMotion), got {type(motion).__name__}.")
     probe = _refine(field, pattern, probe, "simulate_scan_series")
-    return _series_jit(field, pattern, mount, probe, jnp.asarray(start, field.dtype),
+    return _series_jit(field, pattern, mount, probe, jnp.asarray(start, field.dtype), motion,
                        n_scans=int(n_scans))
 
 
-def _core(field, pattern, mount, probe, start, n_scans):
+def _moving_los(field, pattern, mount_d, origin_local, probe, t_sub, motion):
+    """LOS ``(n, g, B)`` of sub-rays at times `t_sub` ``(n, 1, B)`` from a moving mount: each
+    sub-ray with the mount, offset and velocity of its time."""
+    dtype = field.dtype
+    g = pattern.n_gates
+    n_body = pattern.sub_directions().reshape(-1, 3)  # (B, 3)
+    to_cfd_rest = lidar_to_cfd_rotation(mount_d)
+    n_scans, _, b = t_sub.shape
+    ranges = pattern.ranges[:, None]
+
+    def one(t, j):
+        off, vel, att = (a.astype(dtype) for a in motion.state(t))
+        moved = eqx.tree_at(lambda m: (m.gamma, m.pitch, m.roll), mount_d,
+                            (mount_d.gamma + att[2], mount_d.pitch + att[0], mount_d.roll + att[1]))
+        n = rotate(body_to_cfd_rotation(moved), n_body[j])
+        at_t = lambda pts, dirs: field.los_local_at(pts, dirs, t)  # noqa: E731
+        los, _ = _beam_los(field, origin_local + rotate(to_cfd_rest, off), n[None], ranges, probe,
+                           los=at_t)
+        return los[:, 0] - jnp.dot(n, rotate(to_cfd_rest, vel), precision=jax.lax.Precision.HIGHEST)
+
+    beams = jnp.broadcast_to(jnp.arange(b), (n_scans, b)).reshape(-1)
+    los = jax.vmap(one)(t_sub.reshape(-1), beams)  # (n B, g)
+    return jnp.moveaxis(los.reshape(n_scans, b, g), 1, 2)  # (n, g, B)
+
+
+def _core(field, pattern, mount, probe, start, n_scans, motion=None):
     """The scan in one mount's geometry; `n_scans` None: steady."""
     dtype = field.dtype
     cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
@@ -167,7 +203,11 @@ def _core(field, pattern, mount, probe, start, n_scans):
                 return field.los_local_at(pts, dirs, t)
             return sampler(t)
 
-        los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)
+        if motion is None:
+            los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)
+        else:  # the probe's cut at the lidar does not move with it: flags from the rest geometry
+            truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)[1]
+            los = _moving_los(field, pattern, mount_d, origin_local, probe, t_sub, motion)
         times = start + scans[:, :, 0] + pattern.ray_times()[None]
     los = jnp.mean(los.reshape(los.shape[:-1] + (r, k)), axis=-1)  # (..., g, r)
     los = jnp.swapaxes(los, -1, -2)  # (..., r, g)
@@ -183,20 +223,20 @@ def _core(field, pattern, mount, probe, start, n_scans):
                       flags=flags.astype(jnp.int32))
 
 
-def _run(field, pattern, mount, probe, start, n_scans):
+def _run(field, pattern, mount, probe, start, n_scans, motion=None):
     # tiny rotation products keep the field's precision (TF32 on GPUs; see lidarjax.forward)
     with jax.default_matmul_precision("highest"):
         if mount.batch_shape:
-            return jax.vmap(lambda m: _core(field, pattern, m, probe, start, n_scans))(mount)
-        return _core(field, pattern, mount, probe, start, n_scans)
+            return jax.vmap(lambda m: _core(field, pattern, m, probe, start, n_scans, motion))(mount)
+        return _core(field, pattern, mount, probe, start, n_scans, motion)
 
 
 def _steady(field, pattern, mount, probe, start):
     return _run(field, pattern, mount, probe, start, None)
 
 
-def _series(field, pattern, mount, probe, start, *, n_scans):
-    return _run(field, pattern, mount, probe, start, n_scans)
+def _series(field, pattern, mount, probe, start, motion, *, n_scans):
+    return _run(field, pattern, mount, probe, start, n_scans, motion)
 
 
 _steady_jit = jax.jit(_steady)

@@ -279,3 +279,21 @@ def test_no_recompilation_for_new_numbers_and_float32_accuracy():
     b = sc.simulate_scan(f32, p, lj.Mount(loc), probe=probe)
     assert b.los.dtype == np.float32
     np.testing.assert_allclose(np.asarray(b.los), np.asarray(a.los), atol=1e-4)
+
+
+def test_series_with_platform_motion_closed_form():
+    """A stare north at elevation e on a platform pitching p(t) and surging s(t) northwards
+    in a uniform northward wind V: the beam's elevation is e + p(t) and the LOS is
+    ``cos(e + p(t)) (V - s'(t))`` at each sub-ray's time."""
+    f = lj.scenes.uniform(9.0, 180.0)  # from the south: blows towards +y at 9 m/s
+    motion = lj.SinusoidalMotion.of(pitch=(3.0, 8.0), surge=(0.5, 5.0))
+    p = sc.stare(0.0, 10.0, RANGES[:3], n_rays=5, accumulation=0.8, gap=0.2)
+    res = sc.simulate_scan_series(f, p, lj.Mount([0.0, 0.0, 0.0]), n_scans=2, motion=motion,
+                                  probe=lj.PulsedProbe(20.0, 20.0, n_nodes=5))
+    t = np.asarray(res.times)  # (2, 5) mid-accumulation, one sub-ray each
+    pitch = 3.0 * np.sin(2 * np.pi * t / 8.0)
+    surge_speed = 0.5 * (2 * np.pi / 5.0) * np.cos(2 * np.pi * t / 5.0)
+    expect = np.cos(np.deg2rad(10.0 + pitch)) * (9.0 - surge_speed)
+    np.testing.assert_allclose(np.asarray(res.los), np.repeat(expect[..., None], 3, -1), atol=1e-12)
+    with pytest.raises(ValueError, match="motion"):
+        sc.simulate_scan_series(f, p, lj.Mount([0.0, 0.0, 0.0]), motion="heave")
