@@ -74,6 +74,9 @@ CALIBRATION_PARAMETERS = ("epsilon", "pitch", "roll")
 #: Largest change of (epsilon, pitch, roll) per Gauss--Newton pass, degrees (a trust region).
 _MAX_STEP = np.array([5.0, 1.0, 1.0])
 
+#: Gauss--Newton stops when no offset moved more than this in a pass, degrees.
+_TOLERANCE = 1e-7
+
 #: A free offset is identifiable when the normalised reduced matrix's smallest eigenvalue
 #: along it exceeds this fraction of the largest (offsets correlated beyond 0.9999 are not).
 IDENTIFIABILITY_RCOND = 1e-4
@@ -97,8 +100,8 @@ class Calibration(eqx.Module):
     - `header`: the record header's value (degrees) where the records state one (pitch and
       roll of a Windcube ``.rtd``/``.sta``), else NaN.
     - `noise`: RMS LOS residual per beam, m/s; `n_records`, `n_problems`: records and
-      record-heights used; `iterations`; `converged` (last step below 1e-6 degrees and every
-      number finite).
+      record-heights used; `iterations`: passes taken; `converged` (last step below 1e-6
+      degrees and every number finite).
     - `notes`: what the records could not tell, in words.
     """
 
@@ -138,11 +141,18 @@ class Calibration(eqx.Module):
 # the forward model of one record-height
 
 
-def _row(geom, coefficients, hidx, direction):
-    k, t = locate(*geom, direction)
-    c = coefficients[:, k, hidx]
+def _spline_and_slope(geom, coefficients, hidx, direction):
+    """Values and direction derivatives (per degree) of a direction spline at one direction
+    per problem: `coefficients` ``(4, s, h, ...)``, `hidx`, `direction` ``(n,)`` ->
+    two ``(n, ...)`` arrays."""
+    start, offsets, widths, uniform = geom
+    k, t = locate(start, offsets, widths, uniform, direction)
+    c = coefficients[:, k, hidx]  # (4, n, ...)
     tt = t.reshape(t.shape + (1,) * (c.ndim - 2))
-    return c[0] + tt * (c[1] + tt * (c[2] + tt * c[3]))
+    wd = widths[k].reshape(tt.shape)
+    value = c[0] + tt * (c[1] + tt * (c[2] + tt * c[3]))
+    slope = (c[1] + tt * (2.0 * c[2] + 3.0 * tt * c[3])) / wd
+    return value, slope
 
 
 def _tilt_change(theta_full, nominal):
@@ -154,29 +164,55 @@ def _tilt_change(theta_full, nominal):
     return m - jnp.eye(3, dtype=m.dtype)
 
 
-def _model(beta, theta_full, ref_dir, hidx, ctx):
-    """LOS ``(b,)`` of one record-height for nuisance `beta` and offsets ``(de, dp, dr)``."""
+def _model_and_jacobian(beta, theta, ref_dir, hidx, ctx):
+    """LOS ``(n, b)`` of every record-height and its Jacobians, in closed form: in the
+    nuisances `beta` ``(n, m)`` (``(u, v)`` m/s, or the speed with a reference direction)
+    -> ``(n, b, m)``, and in the offsets ``(de, dp, dr)`` (degrees) -> ``(n, b, 3)``."""
     geom, rc, vc, vkind, nvec, nominal = ctx
-    if beta.shape[0] == 2:
-        u, v = beta[0], beta[1]
+    dtype = beta.dtype
+    # the beams' change by the tilt offsets and its derivatives, once for all problems
+    dn_of = lambda th: nvec @ _tilt_change(th, nominal).T  # noqa: E731  (b, 3)
+    dn = dn_of(theta)
+    ddn = jax.jacfwd(dn_of)(theta)  # (b, 3, 3[theta])
+    if beta.shape[1] == 2:
+        u, v = beta[:, 0], beta[:, 1]
         h2 = u * u + v * v
-        safe = jnp.where(h2 > 0, h2, 1.0)
-        speed = jnp.where(h2 > 0, jnp.sqrt(safe), 0.0)
-        d = jnp.rad2deg(jnp.arctan2(jnp.where(h2 > 0, -u, 0.0), jnp.where(h2 > 0, -v, 1.0)))
+        pos = h2 > 0
+        safe = jnp.where(pos, h2, 1.0)
+        speed = jnp.where(pos, jnp.sqrt(safe), 0.0)
+        d = jnp.rad2deg(jnp.arctan2(jnp.where(pos, -u, 0.0), jnp.where(pos, -v, 1.0)))
     else:
-        speed, d = beta[0], ref_dir
-    dl = d - theta_full[0]
-    r = _row(geom, rc, hidx, dl)  # (b,)
+        speed, d = beta[:, 0], ref_dir
+    dl = d - theta[0]
+    r, dr = _spline_and_slope(geom, rc, hidx, dl)  # (n, b)
     if vkind == "beam":
-        vel = _row(geom, vc, hidx, dl)  # (b, 3)
+        vel, dvel = _spline_and_slope(geom, vc, hidx, dl)  # (n, b, 3)
     elif vkind == "point":
-        vel = jnp.broadcast_to(_row(geom, vc, hidx, dl), nvec.shape)
+        vel, dvel = _spline_and_slope(geom, vc, hidx, dl)  # (n, 3)
+        vel, dvel = vel[:, None, :], dvel[:, None, :]
     else:
         rad = jnp.deg2rad(dl)
-        vel = jnp.broadcast_to(jnp.stack([-jnp.sin(rad), -jnp.cos(rad), jnp.zeros_like(rad)]),
-                               nvec.shape)
-    dn = nvec @ _tilt_change(theta_full, nominal).T  # (b, 3): (M - I) n_b
-    return speed * (r + jnp.sum(dn * vel, axis=-1))
+        zero = jnp.zeros_like(rad)
+        vel = jnp.stack([-jnp.sin(rad), -jnp.cos(rad), zero], -1)[:, None, :]
+        dvel = jnp.stack([-jnp.cos(rad), jnp.sin(rad), zero], -1)[:, None, :] * (np.pi / 180.0)
+    f = r + jnp.sum(dn * vel, -1)  # (n, b) per unit speed
+    df = dr + jnp.sum(dn * dvel, -1)  # per degree of direction
+    model = speed[:, None] * f
+    j_eps = -speed[:, None] * df
+    j_tilt = speed[:, None, None] * jnp.einsum("bkt,nbk->nbt", ddn, jnp.broadcast_to(
+        vel, f.shape + (3,)), precision=HIGHEST)  # (n, b, 3)
+    j_theta = jnp.concatenate([j_eps[..., None], j_tilt[..., 1:]], -1)
+    if beta.shape[1] == 2:
+        deg = 180.0 / np.pi
+        su = jnp.where(pos, u / jnp.where(pos, speed, 1.0), 0.0)
+        sv = jnp.where(pos, v / jnp.where(pos, speed, 1.0), 0.0)
+        du = jnp.where(pos, v / safe, 0.0) * deg  # d(direction)/du, degrees per m/s
+        dv = jnp.where(pos, -u / safe, 0.0) * deg
+        j_beta = jnp.stack([su[:, None] * f + speed[:, None] * df * du[:, None],
+                            sv[:, None] * f + speed[:, None] * df * dv[:, None]], -1)
+    else:
+        j_beta = f[..., None]
+    return model, j_beta.astype(dtype), j_theta.astype(dtype)
 
 
 def _start(los, w, values):
@@ -218,7 +254,7 @@ def _calibrate_core(los, w, ref_dir, hidx, rec, ctx, values, knots, free, iterat
     if with_ref:
         beta = u0[:, None]
         # start from the closed-form speed at the reference direction
-        r_ref = jax.vmap(lambda d, hi: _row(ctx[0], ctx[1], hi, d))(ref_dir, hidx)
+        r_ref = _spline_and_slope(ctx[0], ctx[1], hidx, ref_dir)[0]
         num = jnp.sum(w * los * r_ref, -1)
         den = jnp.sum(w * r_ref * r_ref, -1)
         beta = jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 0.0)[:, None]
@@ -226,17 +262,12 @@ def _calibrate_core(los, w, ref_dir, hidx, rec, ctx, values, knots, free, iterat
         d0 = jnp.deg2rad(knots[k_start])
         beta = jnp.stack([-u0 * jnp.sin(d0), -u0 * jnp.cos(d0)], -1)
     theta = jnp.zeros(3, dtype)
-    m = beta.shape[1]
     freef = free.astype(dtype)
 
     def pieces(beta, theta):
-        def one(bi, di, hi, li):
-            def f(x):
-                return _model(x[:m], x[m:], di, hi, ctx)
-            x = jnp.concatenate([bi, theta])
-            return li - f(x), jax.jacfwd(f)(x)
-        r, jac = jax.vmap(one)(beta, ref_dir, hidx, los)
-        jb, jt = jac[..., :m], jac[..., m:] * freef  # (n, b, m), (n, b, 3)
+        model, jb, jt = _model_and_jacobian(beta, theta, ref_dir, hidx, ctx)
+        r = los - model
+        jt = jt * freef
         a = jnp.einsum("nb,nbi,nbj->nij", w, jb, jb, precision=HIGHEST)
         gb = jnp.einsum("nb,nbi,nb->ni", w, jb, r, precision=HIGHEST)
         c = jnp.einsum("nb,nbi,nbj->nij", w, jb, jt, precision=HIGHEST)
@@ -254,17 +285,25 @@ def _calibrate_core(los, w, ref_dir, hidx, rec, ctx, values, knots, free, iterat
         hm = hmat * freef[:, None] * freef[None, :] + eye * (1.0 - freef)[:, None]
         return jnp.linalg.solve(hm, g * freef)
 
-    def step(carry, _):
-        beta, theta = carry
+    limit = jnp.asarray(_MAX_STEP, dtype)
+
+    def step(carry):
+        it, beta, theta, _ = carry
         r, h_i, s_i, ainv, gb, c, ok = pieces(beta, theta)
         hmat, g = jnp.sum(h_i, 0), jnp.sum(s_i, 0)
         # a trust region: at most 5 degrees of north offset and 1 degree of tilt per pass
-        dtheta = jnp.clip(solve_theta(hmat, g), -jnp.asarray(_MAX_STEP, dtype), jnp.asarray(_MAX_STEP, dtype))
+        dtheta = jnp.clip(solve_theta(hmat, g), -limit, limit)
         dbeta = jnp.einsum("nij,nj->ni", ainv, gb - jnp.einsum("nij,j->ni", c, dtheta))
         dbeta = jnp.where(ok[:, None], dbeta, 0.0)
-        return (beta + dbeta, theta + dtheta), jnp.max(jnp.abs(dtheta))
+        return it + 1, beta + dbeta, theta + dtheta, jnp.max(jnp.abs(dtheta))
 
-    (beta, theta), steps = jax.lax.scan(step, (beta, theta), None, length=iterations)
+    def going(carry):
+        it, _, _, last = carry
+        # at least three passes (the nuisances settle), then until the offsets stop moving
+        return (it < iterations) & ((it < 3) | ~(last < _TOLERANCE))
+
+    start = (jnp.asarray(0), beta, theta, jnp.asarray(jnp.inf, dtype))
+    passes, beta, theta, last = jax.lax.while_loop(going, step, start)
     r, h_i, s_i, _, _, _, ok = pieces(beta, theta)
     hmat = jnp.sum(h_i, 0)
     # the sandwich's meat: per record, the sum of its problems' reduced gradients
@@ -273,7 +312,8 @@ def _calibrate_core(los, w, ref_dir, hidx, rec, ctx, values, knots, free, iterat
     wrss = jnp.sum(w * r * r * ok[:, None])
     nobs = jnp.sum((w > 0) & ok[:, None])
     n_ok = jnp.sum(ok)
-    return theta, hmat, meat, wrss, nobs, n_ok, steps[-1], jnp.sum(jnp.any(w > 0, -1) & ok)
+    return (theta, hmat, meat, wrss, nobs, n_ok, last, jnp.sum(jnp.any(w > 0, -1) & ok),
+            passes)
 
 
 def _as_array(x, name):
@@ -314,9 +354,9 @@ def calibrate(
       reference whose speed calibration differs from the lidar's cannot bias the angles.
     - `weights`: optional ``(r, h, b)`` relative inverse variances of the beams.
     - `min_beams`: fewest usable beams for a record-height to count (default 3).
-    - `iterations`: Gauss--Newton passes over the records (default 12; each pass updates
-      the offsets, by at most 5 degrees of epsilon and 1 degree of tilt, and every
-      record-height's free stream).
+    - `iterations`: most Gauss--Newton passes over the records (default 12; each pass
+      updates the offsets, by at most 5 degrees of epsilon and 1 degree of tilt, and every
+      record-height's free stream; it stops once the offsets move less than 1e-7 degrees).
     - `covariance`: ``"robust"`` (record-clustered sandwich, default) or ``"model"``
       (``sigma**2 H^-1``); see the module docstring.
 
@@ -415,7 +455,7 @@ def calibrate(
         free[0] = False
         notes.append(_NOT_IDENTIFIABLE_EPSILON)
     values = jnp.where(table.valid, table.response, 0.0).astype(dtype)
-    theta, hmat, meat, wrss, nobs, n_ok, last, n_used = _calibrate_core(
+    theta, hmat, meat, wrss, nobs, n_ok, last, n_used, passes = _calibrate_core(
         flat(los), flat(w), rdir, hidx, rec, ctx, values, table.directions.astype(dtype),
         jnp.asarray(free), int(iterations), int(r), bool(with_ref))
     theta, hmat, meat = (np.asarray(x, np.float64) for x in (theta, hmat, meat))
@@ -472,5 +512,5 @@ def calibrate(
         covariance=f(cov), correlation=f(corr), identifiable=jnp.asarray(ident[sel]),
         header=f(head), noise=f(math.sqrt(sigma2)),
         n_records=n_rec,
-        n_problems=n_used, iterations=int(iterations), converged=converged,
+        n_problems=n_used, iterations=int(passes), converged=converged,
         notes=tuple(notes))
