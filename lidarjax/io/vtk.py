@@ -85,7 +85,7 @@ class VTKField(OpenFOAMField):
         if cells is None:
             cells = np.arange(self.mesh.n_cells)
         cells = np.asarray(cells, np.int64)
-        s = build_sampler(self.mesh, self.cell_values, self.boundary, cells)
+        s = build_sampler(self.mesh, self.cell_values, self.boundary, cells, self.bounds)
         if self.point_values is None:
             return s
         # the points build_sampler used, in its order: those of the region cells' faces
@@ -125,8 +125,8 @@ def _blocks(path: Path) -> list[Path]:
 
 
 def _cell_faces(mesh, path: Path):
-    """Per face occurrence: owning cell, padded vertex ids ``(n, k)``, sizes; plus the
-    per-cell data blocks and cell count."""
+    """Per face occurrence: owning cell, padded vertex ids (column-major ``(k, n)``), sizes;
+    plus the per-cell data blocks and cell count."""
     cells_faces, cell_ids, sizes = [], [], []
     n_cells = 0
     kept_blocks = []
@@ -156,143 +156,180 @@ def _cell_faces(mesh, path: Path):
     width = max(f.shape[1] for f in cells_faces)
     pad = np.concatenate([np.pad(f, ((0, 0), (0, width - f.shape[1])), constant_values=-1)
                           for f in cells_faces])
-    return pad, np.concatenate(cell_ids), np.concatenate(sizes), n_cells, kept_blocks
+    return _label_type(pad.T, mesh.points.shape[0]), np.concatenate(cell_ids), np.concatenate(sizes), \
+        n_cells, kept_blocks
+
+
+def _label_type(pad: np.ndarray | None, n_points: int):
+    """Point labels as int32 where they fit (half the memory traffic), else int64: the
+    dtype, or `pad` converted to it."""
+    dtype = np.dtype(np.int32 if n_points < 2**31 - 1 else np.int64)
+    return dtype if pad is None else pad.astype(dtype)
 
 
 def _sorted_rows(pad: np.ndarray, sizes: np.ndarray, fill: int) -> np.ndarray:
-    """Each row of `pad` (vertex ids, `-1` beyond `sizes`) sorted, the padding as `fill`
-    (above every id): triangles and quads by a sorting network, longer rows by `np.sort`."""
-    key = np.where(pad < 0, fill, pad)
+    """The vertex ids of each face (column `i` of `pad` `(k, n)`, `-1` beyond `sizes[i]`)
+    sorted, the padding as `fill` (above every id): row `j` of the result holds the `j`-th
+    smallest ids. Triangles and quads are sorted by a sorting network, the others by
+    `np.sort`."""
+    key = np.where(pad < 0, pad.dtype.type(fill), pad)
     small = sizes <= 4
+    cols = min(4, key.shape[0])
     rows = None if small.all() else np.flatnonzero(small)
-    k = key[:, :4] if rows is None else key[rows, :4]
-    if k.shape[1] == 4:
+    k = key[:cols] if rows is None else key[:cols, rows]
+    if cols == 4:
         for i, j in ((0, 1), (2, 3), (0, 2), (1, 3), (1, 2)):
-            lo = np.minimum(k[:, i], k[:, j])
-            np.maximum(k[:, i], k[:, j], out=k[:, j])
-            k[:, i] = lo
+            lo = np.minimum(k[i], k[j])
+            np.maximum(k[i], k[j], out=k[j])
+            k[i] = lo
     else:
-        k = np.sort(k, axis=1)
-    if rows is None:
-        key[:, :4] = k
-    else:
-        key[rows, :4] = k
+        k = np.sort(k, axis=0)
+    if rows is not None:
+        key[:cols, rows] = k
         big = np.flatnonzero(~small)
-        key[big] = np.sort(key[big], axis=1)
+        key[:, big] = np.sort(key[:, big], axis=0)
     return key
 
 
 def _unique_rows(key: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """Group equal rows of `key` (`(n, k)` int64, each row sorted, every id in
-    `0..n_points`, `n_points` being the padding): `(order, group)`, `order` sorting the
-    rows lexicographically (stable, so `np.unique(key, axis=0)`'s order) and `group[i]` the
-    unique-row number of row `order[i]`.
+    """Group equal rows of a table given column-major (`key` `(k, n)`: row `i` of the table
+    is `key[:, i]`, sorted, every id in `0..n_points`, `n_points` being the padding):
+    `(order, group)`, `order` sorting the rows lexicographically (stable, so
+    `np.unique(table, axis=0)`'s order) and `group[i]` the unique-row number of row
+    `order[i]`.
 
-    Rows are packed a few columns per int64 (order kept) and sorted on the packs covering
-    their three smallest ids, which already tell two faces of a valid mesh apart; the other
-    packs are then compared where those tie, and a full lexicographic sort is done only
-    when they differ there."""
-    n, width = key.shape
+    Rows are packed a few ids per int64 (order kept) and sorted on the packs covering their
+    three smallest ids, which mostly tell two faces of a mesh apart; runs of equal such
+    packs are then ordered by their other ids and row number, a pair by a swap, longer runs
+    (or pairs differing beyond) by a small lexsort."""
+    width, n = key.shape
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     base = np.int64(n_points) + 1
     per = max(1, int(np.floor(62 * np.log(2) / np.log(float(base)))))
 
     def pack(j: int, rows=slice(None)) -> np.ndarray:
-        k = key[rows, j].astype(np.int64)
+        k = key[j, rows].astype(np.int64)
         for c in range(j + 1, min(j + per, width)):
-            k = k * base + key[rows, c]
+            k *= base
+            k += key[c, rows]
         return k
 
-    packs = range(0, width, per)
+    packs = list(range(0, width, per))
     n_primary = min(len(packs), -(-3 // per))
-    primary = [pack(j) for j in packs[:n_primary]]
+    primary, rest = packs[:n_primary], packs[n_primary:]
     if n_primary == 1:
-        # quicksort, then equal keys put back in row order (equal keys come in pairs in a
-        # valid mesh: the two sides of a face)
-        order = primary[0].argsort()
-        ks = primary[0][order]
+        k0 = pack(0)
+        order = k0.argsort()  # not stable: equal keys are put in row order below
+        ks = k0[order]
         tie = ks[1:] == ks[:-1]
-        if np.any(tie[1:] & tie[:-1]):
-            order = primary[0].argsort(kind="stable")
-        else:
-            at = np.flatnonzero(tie)
-            at = at[order[at] > order[at + 1]]
-            order[at], order[at + 1] = order[at + 1], order[at].copy()
     else:
-        order = np.lexsort(primary[::-1])
+        order = np.lexsort([pack(j) for j in primary][::-1])
         tie = np.ones(n - 1, bool)
-        for k in primary:
-            ks = k[order]
-            tie &= ks[1:] == ks[:-1]
-    at = np.flatnonzero(tie)
-    rest = n_primary * per  # the columns the primary packs do not cover
-    if at.size and rest < width and np.any(key[order[at], rest:] != key[order[at + 1], rest:]):
-        order = np.lexsort([pack(j) for j in packs][::-1])
-        tie = np.ones(n - 1, bool)
-        for j in packs:
+        for j in primary:
             ks = pack(j, order)
             tie &= ks[1:] == ks[:-1]
+    at = np.flatnonzero(tie)
+    if at.size:
+        # pairs (runs of two) alike beyond the primary ids: row order by a swap; other runs:
+        # ordered by (other ids, row)
+        padded = np.r_[False, tie, False]
+        hard = padded[at] | padded[at + 2]  # the pair's run is longer than two
+        if rest:
+            c0 = packs[n_primary]
+            hard |= np.any(key[c0:, order[at]] != key[c0:, order[at + 1]], axis=0)
+        easy = at[~hard]
+        swap = easy[order[easy] > order[easy + 1]]
+        order[swap], order[swap + 1] = order[swap + 1], order[swap].copy()
+        if hard.any():
+            run = np.zeros(n, np.int64)
+            np.cumsum(~tie, out=run[1:])
+            flagged = np.zeros(int(run[-1]) + 1, bool)
+            flagged[run[at[hard]]] = True
+            pos = np.flatnonzero(flagged[run])
+            sub = order[pos]
+            perm = np.lexsort([sub] + [pack(j, sub) for j in rest][::-1] + [run[pos]])
+            sub = sub[perm]
+            order[pos] = sub
+            same = np.ones(pos.size - 1, bool)
+            for j in rest:
+                ks = pack(j, sub)
+                same &= ks[1:] == ks[:-1]
+            inner = run[pos[1:]] == run[pos[:-1]]  # both in the same primary run
+            tie[pos[:-1][inner]] = same[inner]
     group = np.zeros(n, np.int64)
     np.cumsum(~tie, out=group[1:])
     return order, group
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """`np.cross` of `(n, 3)` vectors (the same products and differences)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
-
-
 def _face_centre_normal(points: np.ndarray, pad: np.ndarray, faces: np.ndarray, nv: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex mean `fc` `(n, 3)` of each face (rows `faces` of the padded vertex ids `pad`,
-    the first `nv[i]` valid) and twice its area vector: the sum over its edges of ``(p_j - fc) x (p_next -
-    fc)``; both summed vertex by vertex, in the face's order."""
+    """Vertex mean `fc` `(n, 3)` of each face (columns `faces` of the padded vertex ids `pad`
+    `(k, m)`, the first `nv[i]` valid) and twice its area vector: the sum over its edges of
+    ``(p_j - fc) x (p_next - fc)``; both summed vertex by vertex, in the face's order.
+
+    A vertex column most faces have is computed for all faces and added where valid (so
+    each valid sum is the plain one); a column few faces have, for those faces only."""
     n = faces.size
-    cols = []  # per vertex column: the faces having it (None: all) and their points
-    acc = np.zeros((n, 3))
-    for j in range(pad.shape[1]):
-        r = np.flatnonzero(nv > j)
-        if r.size == 0:
+    xyz = np.ascontiguousarray(points.T)
+    cols = []  # per vertex column j: (valid mask, or None if all; sparse row ids or None; points)
+    acc = np.zeros((3, n))
+    for j in range(pad.shape[0]):
+        valid = nv > j
+        count = int(np.count_nonzero(valid))
+        if count == 0:
             break
-        rows = None if r.size == n else r
-        pj = points[pad[faces, j]] if rows is None else points[pad[faces[r], j]]
-        cols.append((rows, pj))
+        if 4 * count > n:  # dense: every face, padding read as point -1
+            mask, rows = (None if count == n else valid), None
+            ids = pad[j, faces]
+        else:
+            mask, rows = valid, np.flatnonzero(valid)
+            ids = pad[j, faces[rows]]
+        pj = np.stack([xyz[a][ids] for a in range(3)])
+        cols.append((mask, rows, pj))
         if j == 0:
-            acc[...] = pj
-        elif rows is None:
+            acc[:] = pj
+        elif rows is not None:
+            acc[:, rows] += pj
+        elif mask is None:
             acc += pj
         else:
-            acc[rows] += pj
-    fc = acc / nv[:, None]
-    d = [pj - (fc if rows is None else fc[rows]) for rows, pj in cols]
-    normal = np.zeros((n, 3))
-    for j, (rows, _) in enumerate(cols):
-        # the next vertex: column j + 1 where the face has one (a subset of these rows, in
-        # the same order), else the first vertex
-        has_next = nv > j + 1 if rows is None else nv[rows] > j + 1
-        if j + 1 < len(cols) and has_next.all():
-            nxt = d[j + 1]
+            np.add(acc, pj, out=acc, where=mask)
+    fc = acc / nv
+    d = [pj - (fc if rows is None else fc[:, rows]) for _, rows, pj in cols]
+    normal = np.zeros((3, n))
+    for j, (mask, rows, _) in enumerate(cols):
+        # the next vertex: column j + 1 where the face has one, else the first vertex
+        if j + 1 == len(cols):
+            nxt = d[0] if rows is None else d[0][:, rows]
         else:
-            first = d[0] if rows is None else d[0][rows]
-            nxt = first.copy()
-            if j + 1 < len(cols):
-                nxt[has_next] = d[j + 1]
-        term = _cross(d[j], nxt)
+            mask1, rows1, _ = cols[j + 1]
+            if rows is None and rows1 is None:
+                nxt = d[j + 1] if mask1 is None else np.where(mask1, d[j + 1], d[0])
+            elif rows is None:  # the next column is sparse
+                nxt = d[0].copy()
+                nxt[:, rows1] = d[j + 1]
+            else:  # both sparse: the next column's rows are a subset of these, in order
+                nxt = d[0][:, rows]
+                nxt[:, nv[rows] > j + 1] = d[j + 1]
+        a, b = d[j], nxt
+        term = np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
         if j == 0:
-            normal[...] = term
-        elif rows is None:
+            normal[:] = term
+        elif rows is not None:
+            normal[:, rows] += term
+        elif mask is None:
             normal += term
         else:
-            normal[rows] += term
-    return fc, normal
+            np.add(normal, term, out=normal, where=mask)
+    return fc.T, normal.T
 
 
 def _poly_mesh(points: np.ndarray, pad, cell_of, sizes, n_cells, path: Path) -> PolyMesh:
-    """The face-based mesh of the cells' faces (`pad`: one padded row of vertex ids per face
-    of each cell, `cell_of` its cell): each face once, owned by the lower cell number and
-    oriented out of it, internal faces first (by owner), then the boundary faces."""
+    """The face-based mesh of the cells' faces (`pad` `(k, n)`: one column of vertex ids per
+    face of each cell, padded with -1, `cell_of` its cell): each face once, owned by the
+    lower cell number and oriented out of it, internal faces first (by owner), then the
+    boundary faces."""
     key = _sorted_rows(pad, sizes, points.shape[0])
     order, group = _unique_rows(key, points.shape[0])
     n_faces = int(group[-1]) + 1 if group.size else 0
@@ -324,15 +361,14 @@ def _poly_mesh(points: np.ndarray, pad, cell_of, sizes, n_cells, path: Path) -> 
     internal = neighbour >= 0
     order = np.concatenate([np.flatnonzero(internal)[np.argsort(owner[internal], kind="stable")],
                             np.flatnonzero(~internal)])
-    verts, nv, flip = pad[occ[order]], nv[order], flip[order]
-    if flip.any():  # reverse the first nv[i] labels of each flipped face
-        rows = np.flatnonzero(flip)
-        col = np.arange(verts.shape[1])[None, :]
-        rev = np.where(col < nv[rows, None], nv[rows, None] - 1 - col, col)
-        verts[rows] = np.take_along_axis(verts[rows], rev, axis=1)
+    occ, nv, flip = occ[order], nv[order], flip[order]
     offsets = np.zeros(order.size + 1, np.int64)
     np.cumsum(nv, out=offsets[1:])
-    labels = verts[verts >= 0]
+    # the labels face by face, flipped faces read backwards
+    face = np.repeat(np.arange(order.size), nv)
+    j = np.arange(offsets[-1]) - offsets[:-1][face]
+    j = np.where(flip[face], nv[face] - 1 - j, j)
+    labels = pad[j, occ[face]].astype(np.int64)
     n_int = int(internal.sum())
     return PolyMesh(points=points, face_offsets=offsets, face_labels=labels, owner=owner[order],
                     neighbour=neighbour[order][:n_int], n_cells=n_cells,
@@ -517,6 +553,7 @@ def _read_vtu(path: Path):
             cell_parts.append(sel)
             size_parts.append(np.full(sel.size, len(face)))
     poly = np.flatnonzero(types == 42)
+    poly_part = None
     if poly.size:
         if "faces" not in cells or "faceoffsets" not in cells:
             raise ValueError(f"{os.fspath(path)}: polyhedral cells without faces/faceoffsets")
@@ -527,7 +564,8 @@ def _read_vtu(path: Path):
         width_p = int(f_size.max())
         col = np.arange(width_p)
         inside = col[None, :] < f_size[:, None]
-        face_parts.append(np.where(inside, stream[np.where(inside, f_start[:, None] + col, 0)], -1))
+        poly_part = np.where(inside, stream[np.where(inside, f_start[:, None] + col, 0)], -1)
+        face_parts.append(poly_part)
         cell_parts.append(f_cell)
         size_parts.append(f_size)
         keep[poly] = True
@@ -537,14 +575,16 @@ def _read_vtu(path: Path):
     # number the kept (volume) cells 0..n-1
     new = np.cumsum(keep) - 1
     width = max(f.shape[1] for f in face_parts)
-    pad = np.full((sum(f.shape[0] for f in face_parts), width), -1, np.int64)
+    for f in face_parts:
+        ids = f[f >= 0] if f is poly_part else f
+        if ids.size and (ids.max() >= points.shape[0] or ids.min() < 0):
+            raise ValueError(f"{os.fspath(path)}: cell connectivity refers to points outside the "
+                             f"{points.shape[0]} points of the file")
+    pad = np.full((width, sum(f.shape[0] for f in face_parts)), -1, _label_type(None, points.shape[0]))
     row = 0
     for f in face_parts:
-        pad[row: row + f.shape[0], : f.shape[1]] = f
+        pad[: f.shape[1], row: row + f.shape[0]] = f.T
         row += f.shape[0]
-    if pad.size and (pad.max() >= points.shape[0] or pad.min() < -1):
-        raise ValueError(f"{os.fspath(path)}: cell connectivity refers to points beyond the "
-                         f"{points.shape[0]} points of the file")
     cell_of = new[np.concatenate(cell_parts)]
     sizes = np.concatenate(size_parts)
     # decode only the velocity candidates (the other arrays are listed by name)
@@ -570,6 +610,10 @@ def _read_legacy(path: Path):
 
 
 
+def _cat(parts: list[np.ndarray]) -> np.ndarray:
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
 def read_vtk_field(path: PathLike) -> VTKField:
     """Read a `.vtu`, legacy `.vtk` or `.vtm` file's volume cells and velocity (see the
     module docstring). Raises `ValueError` naming the file for a file without volume cells
@@ -588,25 +632,31 @@ def read_vtk_field(path: PathLike) -> VTKField:
             raise ValueError(f"{os.fspath(f)}: no velocity array (U, velocity, V with 3 "
                              f"components) in the point or cell data; found {', '.join(found) or 'none'}")
         pts_all.append(points_f)
-        pad_all.append(np.where(pad >= 0, pad + n_pts, -1))
+        pad_all.append(pad if n_pts == 0 else np.where(pad >= 0, pad.astype(np.int64) + n_pts, -1))
         cell_all.append(cell_of + n_cells)
         size_all.append(sizes)
         cval_all.append(cv)
         pval_all.append(pv)
         n_pts += points_f.shape[0]
         n_cells += nc
-    points = np.concatenate(pts_all)
-    pad = np.concatenate([np.pad(a, ((0, 0), (0, max(b.shape[1] for b in pad_all) - a.shape[1])),
-                                 constant_values=-1) for a in pad_all])
-    cell_of, sizes = np.concatenate(cell_all), np.concatenate(size_all)
+    points = _cat(pts_all)
+    if len(pad_all) == 1:
+        pad = pad_all[0]
+    else:
+        width = max(b.shape[0] for b in pad_all)
+        pad = _label_type(np.concatenate([np.pad(a.astype(np.int64), ((0, width - a.shape[0]), (0, 0)),
+                                                 constant_values=-1) for a in pad_all], axis=1),
+                          points.shape[0])
+    cell_of, sizes = _cat(cell_all), _cat(size_all)
     mesh = _poly_mesh(points, pad, cell_of, sizes, n_cells, p)
     have_points = all(v is not None for v in pval_all)
-    point_values = np.concatenate(pval_all) if have_points else None
+    point_values = _cat(pval_all) if have_points else None
     if all(v is not None for v in cval_all):
-        cell_values = np.concatenate(cval_all)
+        cell_values = _cat(cval_all)
     elif point_values is not None:  # mean of the cell's points (each point counted once)
-        flat_cell = np.repeat(cell_of, (pad >= 0).sum(1))
-        flat_pt = pad[pad >= 0]
+        valid = pad >= 0
+        flat_cell = np.broadcast_to(cell_of, pad.shape)[valid]
+        flat_pt = pad[valid].astype(np.int64)
         pairs = np.unique(flat_cell * np.int64(points.shape[0]) + flat_pt)
         c, q = pairs // points.shape[0], pairs % points.shape[0]
         cell_values = np.zeros((n_cells, 3))

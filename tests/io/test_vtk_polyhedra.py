@@ -155,13 +155,14 @@ def test_unique_rows_is_numpys_lexicographic_unique(n_points, rows):
     else:
         pad[:2000] = pad[rng.integers(0, 2000, 2000)]
     sizes = (pad >= 0).sum(1)
-    key = _sorted_rows(pad, sizes, n_points)
-    np.testing.assert_array_equal(key, np.sort(np.where(pad < 0, n_points, pad), axis=1))
+    key = _sorted_rows(pad.T.copy(), sizes, n_points)  # column-major in and out
+    table = np.sort(np.where(pad < 0, n_points, pad), axis=1)
+    np.testing.assert_array_equal(key.T, table)
     order, group = _unique_rows(key, n_points)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    _, first, inverse = np.unique(table, axis=0, return_index=True, return_inverse=True)
     np.testing.assert_array_equal(group[np.argsort(order)], inverse.reshape(-1))
     np.testing.assert_array_equal(order[np.r_[True, group[1:] != group[:-1]]], first)
-    np.testing.assert_array_equal(order, np.lexsort(key.T[::-1]))  # stable: row order in ties
+    np.testing.assert_array_equal(order, np.lexsort(table.T[::-1]))  # stable: row order in ties
 
 
 def _ascii_vtu(path, faces_stream):
