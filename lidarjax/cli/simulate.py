@@ -12,10 +12,9 @@ import sys
 import jax.numpy as jnp
 
 from ..forward import probe_for_field
-from ..io import read_settings
+from ..io import read_settings, simulate_points
 from ..io.fields import check_field_file, load_field
 from ..probe import PulsedProbe
-from ..workflows.monitor_points import monitor_points
 from ..workflows.seed_results import explain_nans, seed_result_files, write_seed_results
 from ..workflows.seed_tables import settings_mount, simulate_settings, table_region
 from ._common import (
@@ -81,7 +80,7 @@ def run(args) -> int:
             used = probe_for_field(grid, scan, heights, probe, caller="simulate") if probe else None
             if used is not None:
                 nodes[b] = used.n_nodes
-            return monitor_points(scan, mount, heights, used).points
+            return simulate_points(scan, mount, heights, used)
 
         field = load_field(paths[b], region=region, exact_at=points)
         fields[b] = getattr(field, "grid", field)  # the grid explains NaNs by its extent

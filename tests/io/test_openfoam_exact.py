@@ -29,6 +29,7 @@ from lidarjax.io import (
     read_openfoam_probes,
     read_settings,
     read_table_csv,
+    simulate_points,
 )
 from lidarjax.io.openfoam import read_openfoam_field, resample_openfoam, sample_openfoam
 
@@ -123,7 +124,7 @@ def test_native_path_equals_openfoam_sampling_on_the_hill(dtype, tmp_path):
 
     def points(grid):
         chosen["probe"] = lj.probe_for_field(grid, scan, h, probe)
-        return lj.monitor_points(scan, mount, h, chosen["probe"]).points
+        return simulate_points(scan, mount, h, chosen["probe"])
 
     f = lj.io.load_field(case, region=lj.scan_bounds(scan, mount, h, probe=probe), dtype=dtype,
                          exact_at=points)
@@ -224,6 +225,20 @@ def test_gradients_against_finite_differences(small):
         e[k] = step
         fd = (sample_openfoam(of, pts[inner] + e) - sample_openfoam(of, pts[inner] - e)) / (2 * step)
         np.testing.assert_allclose(jac[:, :, k], fd, rtol=1e-6, atol=1e-6)
+
+
+def test_simulate_points_hold_every_point_simulate_samples(small):
+    """`simulate_points` (one compiled call) holds every point `monitor_points` lists (taken
+    from `simulate` itself), plus the nodes behind the lidar, which `simulate` also samples."""
+    _of, _grid, pts, scan, probe, mount, h = small
+    sp = simulate_points(scan, mount, h, probe)
+    assert sp.shape == (h.size * 5 * (probe.n_nodes + 1) + h.size, 3)
+    d = np.linalg.norm(pts[:, None, :] - sp[None, :, :], axis=-1).min(axis=1)
+    assert d.max() < 1e-9
+    tilted = lj.Mount(ROOF, beta=10.0, gamma=5.0, psi=-3.0, epsilon=0.0, pitch=4.0, roll=-2.0)
+    mp = lj.monitor_points(scan, tilted, h, probe).points
+    sp = simulate_points(scan, tilted, h, probe)
+    assert np.linalg.norm(mp[:, None, :] - sp[None, :, :], axis=-1).min(axis=1).max() < 1e-9
 
 
 def test_refuses_bad_input(small):
