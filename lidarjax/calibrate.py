@@ -131,7 +131,8 @@ class Calibration(eqx.Module):
                 continue
             hv = float(self.header[i])
             head = f"; header {hv:.3f} deg" if math.isfinite(hv) else ""
-            lines.append(f"{name}: {float(self.value[i]):.3f} deg (offset {off:+.3f} +- "
+            lines.append(f"{name}: {'(not converged) ' if not self.converged else ''}"
+                         f"{float(self.value[i]):.3f} deg (offset {off:+.3f} +- "
                          f"{sd:.3f} deg from the table's {float(self.nominal[i]):.3f}; 95 % "
                          f"[{off - 1.96 * sd:+.3f}, {off + 1.96 * sd:+.3f}]){head}")
         return lines + list(self.notes)
@@ -492,6 +493,12 @@ def calibrate(
                 cov[np.ix_(sub, sub)] = c
         else:
             ident[idx[ok_d]] = False
+    converged = bool(np.isfinite(float(last)) and float(last) < 1e-6 and np.all(
+        np.isfinite(theta)))
+    if not converged:
+        notes.append(f"did not converge in {int(passes)} passes (offsets still moving by "
+                     f"{float(last):.2g} deg): these records do not determine the offsets; the "
+                     "values are the last iterate, not an estimate")
     for j, name in enumerate(CALIBRATION_PARAMETERS):
         if free[j] and not ident[j]:
             notes.append(f"{name} is not identifiable from these records (too few directions, "
@@ -504,8 +511,6 @@ def calibrate(
         corr = cov / np.outer(std, std)
     nom = nominal_all[sel]
     head = np.array([header.get(x, math.nan) for x in names])
-    converged = bool(np.isfinite(float(last)) and float(last) < 1e-6 and np.all(
-        np.isfinite(theta)))
     f = lambda a: jnp.asarray(a, dtype)  # noqa: E731
     return Calibration(
         names=names, offset=f(off), value=f(nom + off), nominal=f(nom), std=f(std),
