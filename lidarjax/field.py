@@ -31,7 +31,8 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._precision import default_float, difference, is_concrete, split
 
-__all__ = ["AbstractField", "GridField", "TimeSampler", "SteadySampler", "DirectSampler"]
+__all__ = ["AbstractField", "GridField", "SnapshotField", "FieldSequence", "TimeSampler",
+           "SteadySampler", "DirectSampler"]
 
 
 class AbstractField(eqx.Module):
@@ -55,6 +56,14 @@ class AbstractField(eqx.Module):
         none (uniform or linear flow) or it is not known on the host. Probe nodes are chosen
         for it (`lidarjax.probe_for_field`): content up to ``pi / resolution`` rad/m along
         the beam is integrated within 0.01 of the probe's transfer function."""
+        return None
+
+    @property
+    def time_span(self) -> tuple[Float[Array, ""], Float[Array, ""]] | None:
+        """``(first, last)`` time (s) at which the field is defined, or ``None`` where it is
+        defined at every time (steady fields, frozen turbulence). Outside the span
+        `sample_local_at` gives NaN and `lidarjax.simulate_series` flags
+        `lidarjax.Flag.TIME_OUTSIDE`."""
         return None
 
     def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
@@ -466,16 +475,18 @@ class GridField(AbstractField):
         i0 = jnp.where(inside, i0, 0).astype(jnp.int32)
         return i0, t, inside
 
-    def _cell_columns(self, points, safe: bool):
+    def _cell_columns(self, points, safe: bool, snapshot=None):
         """Gather the cell of every point: four ``(..., 6)`` runs ``(u, v, w)`` of the lower
         and upper ``z`` node of the columns ``(i, j), (i, j+1), (i+1, j), (i+1, j+1)``, the
         fractions ``(tx, ty, tz)`` and the mask of points inside the grid.
 
         With `safe` (the derivative path, see `_grid_sample`), the mask also excludes cells
         touching a solid (NaN) node, and the runs and fractions are zeroed outside it,
-        so everything downstream is finite.
+        so everything downstream is finite. `snapshot` (int32, broadcastable to the points'
+        leading shape): for a stack of snapshots (`SnapshotField`: velocity ``(t, nx, ny, nz,
+        3)``), which one each point reads.
         """
-        _, ny, nz = self.shape
+        nx, ny, nz = (a.shape[0] for a in (self.x_local, self.y_local, self.z_local))
         if self.velocity.size >= 2**31:
             raise ValueError(
                 f"GridField: {self.velocity.size} velocity values exceed the int32 flat index "
@@ -485,6 +496,8 @@ class GridField(AbstractField):
             self._axis_index(a, points[..., a]) for a in range(3)
         )
         base = 3 * ((i * ny + j) * nz + k)
+        if snapshot is not None:
+            base = base + snapshot * (3 * nx * ny * nz)
         flat = self.velocity.reshape(-1)
         dims = jax.lax.GatherDimensionNumbers(
             offset_dims=(base.ndim,), collapsed_slice_dims=(), start_index_map=(0,)
@@ -540,14 +553,14 @@ class GridField(AbstractField):
         d = jnp.broadcast_to(jnp.asarray(directions).astype(self.dtype), points.shape)
         return _grid_los(self, points, d)
 
-    def _sample(self, points, safe: bool):
-        columns, t, inside = self._cell_columns(points, safe)
+    def _sample(self, points, safe: bool, snapshot=None):
+        columns, t, inside = self._cell_columns(points, safe, snapshot)
         t = [tt[..., None] for tt in t]
         val = self._lerp_cell([(c[..., 0:3], c[..., 3:6]) for c in columns], t)
         return jnp.where(inside[..., None], val, jnp.nan)
 
-    def _los(self, points, d, safe: bool):
-        columns, t, inside = self._cell_columns(points, safe)
+    def _los(self, points, d, safe: bool, snapshot=None):
+        columns, t, inside = self._cell_columns(points, safe, snapshot)
         dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
 
         def project(c):
@@ -584,3 +597,288 @@ def _grid_los(field, points, directions):
 @_grid_los.defjvp
 def _grid_los_jvp(primals, tangents):
     return jax.jvp(lambda f, p, d: f._los(p, d, safe=True), primals, tangents)
+
+
+@jax.custom_jvp
+def _snapshot_sample(field, points, snapshot):
+    return field._sample(points, False, snapshot)
+
+
+@_snapshot_sample.defjvp
+def _snapshot_sample_jvp(primals, tangents):
+    field, points, snapshot = primals
+    return jax.jvp(lambda f, p: f._sample(p, True, snapshot), primals[:2], tangents[:2])
+
+
+@jax.custom_jvp
+def _snapshot_los(field, points, directions, snapshot):
+    return field._los(points, directions, False, snapshot)
+
+
+@_snapshot_los.defjvp
+def _snapshot_los_jvp(primals, tangents):
+    field, points, directions, snapshot = primals
+    return jax.jvp(lambda f, p, d: f._los(p, d, True, snapshot), primals[:3], tangents[:3])
+
+
+def _lerp_in_time(v0, v1, s, ok):
+    """``v0 + s (v1 - v0)`` where `ok`, NaN elsewhere; non-finite values are zeroed before
+    the lerp so that gradients stay finite where the result is masked (`AbstractField`)."""
+    v0, v1 = jnp.where(ok, v0, 0.0), jnp.where(ok, v1, 0.0)
+    s = jnp.where(ok, s, 0.0)
+    return jnp.where(ok, v0 + s * (v1 - v0), jnp.nan)
+
+
+class SnapshotField(AbstractField):
+    """Snapshots of an unsteady flow (LES, URANS) on one grid: trilinear in space, linear in
+    time between consecutive snapshots, NaN outside their span.
+
+    **Arguments:**
+
+    - `times`: ``(t,)`` snapshot times in seconds, strictly increasing, at least two. Use
+      times relative to the start of the run or record: in float32 a time ``t`` resolves
+      ``ulp(t)`` (0.002 s at one hour).
+    - `fields`: ``t`` `GridField`\\ s on one grid (equal axes, origin and dtype; e.g. one
+      CFD case's time folders resampled onto the same nodes), velocity m/s in the CFD frame.
+
+    At a point and time ``tau`` with ``times[i] <= tau <= times[i + 1]`` the velocity is
+    ``(1 - s) u_i + s u_{i+1}``, ``s = (tau - times[i]) / (times[i + 1] - times[i])``, each
+    ``u`` trilinear as in `GridField`: NaN outside the grid, in a solid cell, or for
+    ``tau`` outside ``[times[0], times[-1]]`` (`time_span`; `lidarjax.simulate_series` flags
+    those LOS with `lidarjax.Flag.TIME_OUTSIDE`). Steady sampling (`sample_local`, as
+    `lidarjax.simulate` calls it) reads the first snapshot. Differentiable in the points,
+    the times and every velocity value (gradients finite where the value is).
+
+    Built on the host from concrete fields; to keep memory bounded over a long run, let a
+    `FieldSequence` load the few snapshots each stretch of time needs
+    (`lidarjax.simulate_series` accepts one).
+    """
+
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
+    grid: GridField  # velocity (t, nx, ny, nz, 3): the snapshots on the shared grid
+    times: Float[Array, " t"]
+
+    def __init__(self, times, fields):
+        fields = list(fields)
+        if len(fields) < 2:
+            raise ValueError(f"SnapshotField: needs at least two snapshots to interpolate in "
+                             f"time, got {len(fields)}.")
+        for k, f in enumerate(fields):
+            if not isinstance(f, GridField) or f.velocity.ndim != 4:
+                raise ValueError(f"SnapshotField: snapshot {k} is a {type(f).__name__}, not a "
+                                 f"single lidarjax.GridField.")
+        first = fields[0]
+        t = np.asarray(times, np.float64) if is_concrete(times) else None
+        if t is not None:
+            if t.ndim != 1 or t.size != len(fields):
+                raise ValueError(f"SnapshotField: `times` must be 1-D with one time per "
+                                 f"snapshot ({len(fields)}), got shape {t.shape}.")
+            if not np.all(np.isfinite(t)):
+                raise ValueError("SnapshotField: `times` must be finite seconds.")
+            if np.any(np.diff(t) <= 0):
+                k = int(np.argmax(np.diff(t) <= 0))
+                raise ValueError(f"SnapshotField: `times` must be strictly increasing; "
+                                 f"times[{k}]={t[k]!r} >= times[{k + 1}]={t[k + 1]!r}.")
+        for k, f in enumerate(fields[1:], start=1):
+            same = (f.uniform == first.uniform and f.velocity.shape == first.velocity.shape
+                    and f.velocity.dtype == first.velocity.dtype)
+            for a, b in ((f.x_local, first.x_local), (f.y_local, first.y_local),
+                         (f.z_local, first.z_local), (f.origin, first.origin),
+                         (f.origin_lo, first.origin_lo), (f.index_start, first.index_start)):
+                same = same and a.shape == b.shape and bool(jnp.array_equal(a, b))
+            if not same:
+                raise ValueError(f"SnapshotField: snapshot {k} has other axes, origin, shape or "
+                                 f"dtype than snapshot 0; snapshots must share one grid "
+                                 f"(resample them onto the same nodes).")
+        self.origin, self.origin_lo = first.origin, first.origin_lo
+        self.grid = eqx.tree_at(lambda g: g.velocity, first,
+                                jnp.stack([f.velocity for f in fields]))
+        self.times = jnp.asarray(times if t is None else t, first.dtype)
+
+    @property
+    def resolution(self) -> float | None:
+        return self.grid.resolution
+
+    @property
+    def time_span(self):
+        return self.times[0], self.times[-1]
+
+    @property
+    def n_snapshots(self) -> int:
+        """Number of snapshots ``t``."""
+        return int(self.times.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the snapshots' velocities."""
+        return self.grid.nbytes
+
+    def snapshot(self, k: int) -> GridField:
+        """Snapshot `k` as a steady `GridField`."""
+        return eqx.tree_at(lambda g: g.velocity, self.grid, self.grid.velocity[k])
+
+    def _locate(self, time):
+        """Lower snapshot index (int32), fraction ``s`` in the interval, inside-span mask."""
+        ts = self.times
+        time = jnp.asarray(time).astype(self.dtype)
+        i = jnp.clip(jnp.searchsorted(ts, time, side="right") - 1, 0, ts.shape[0] - 2)
+        i = i.astype(jnp.int32)
+        t0, t1 = ts[i], ts[i + 1]
+        s = (time - t0) / (t1 - t0)
+        return i, s, (time >= ts[0]) & (time <= ts[-1])
+
+    def _broadcast(self, points, time):
+        points = jnp.asarray(points).astype(self.dtype)
+        time = jnp.asarray(time).astype(self.dtype)
+        shape = jnp.broadcast_shapes(time.shape, points.shape[:-1])
+        return jnp.broadcast_to(points, shape + (3,)), jnp.broadcast_to(time, shape)
+
+    def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+        """The first snapshot's velocity (m/s, CFD frame) at local points (metres)."""
+        return self.sample_local_at(points, self.times[0])
+
+    def sample_local_at(self, points, time):
+        points, time = self._broadcast(points, time)
+        i, s, inside = self._locate(time)
+        v0 = _snapshot_sample(self.grid, points, i)
+        v1 = _snapshot_sample(self.grid, points, i + 1)
+        ok = inside & jnp.all(jnp.isfinite(v0) & jnp.isfinite(v1), axis=-1)
+        return _lerp_in_time(v0, v1, s[..., None], ok[..., None])
+
+    def los_local_at(self, points, directions, time):
+        points, time = self._broadcast(points, time)
+        d = jnp.broadcast_to(jnp.asarray(directions).astype(self.dtype), points.shape)
+        i, s, inside = self._locate(time)
+        l0 = _snapshot_los(self.grid, points, d, i)
+        l1 = _snapshot_los(self.grid, points, d, i + 1)
+        ok = inside & jnp.isfinite(l0) & jnp.isfinite(l1)
+        return _lerp_in_time(l0, l1, s, ok)
+
+    def time_sampler(self, points, directions=None, *, n_times: int = 1) -> TimeSampler:
+        """As `AbstractField.time_sampler`; when the points are sampled at more times than
+        there are snapshots, each snapshot is sampled once at the points and the calls only
+        interpolate in time (`SnapshotSampler`)."""
+        points = jnp.asarray(points).astype(self.dtype)
+        if n_times <= self.n_snapshots:
+            return DirectSampler(self, points, directions)
+        k = jnp.arange(self.n_snapshots, dtype=jnp.int32)
+        if directions is None:
+            values = jax.vmap(lambda j: _snapshot_sample(self.grid, points, j))(k)
+        else:
+            d = jnp.broadcast_to(jnp.asarray(directions).astype(self.dtype), points.shape)
+            values = jax.vmap(lambda j: _snapshot_los(self.grid, points, d, j))(k)
+        return SnapshotSampler(self.times, values, vector=directions is None)
+
+
+class SnapshotSampler(TimeSampler):
+    """A `SnapshotField`'s values at fixed points at every snapshot (``(t, ...)``),
+    interpolated linearly in time at each call; NaN outside the snapshots' span."""
+
+    times: Float[Array, " t"]
+    values: Float[Array, ...]
+    vector: bool = eqx.field(static=True)
+
+    def __call__(self, time):
+        ts, vals = self.times, self.values
+        lead = vals.shape[1:-1] if self.vector else vals.shape[1:]
+        time = jnp.asarray(time).astype(vals.dtype)
+        shape = jnp.broadcast_shapes(time.shape, lead)
+        time = jnp.broadcast_to(time, shape)
+        i = jnp.clip(jnp.searchsorted(ts, time, side="right") - 1, 0, ts.shape[0] - 2)
+        s = (time - ts[i]) / (ts[i + 1] - ts[i])
+        inside = (time >= ts[0]) & (time <= ts[-1])
+        flat = vals.reshape((vals.shape[0], -1) + vals.shape[1 + len(lead):])
+        n = int(np.prod(lead, dtype=np.int64))
+        where_ = jnp.broadcast_to(jnp.arange(n).reshape(lead), shape)
+        v0, v1 = flat[i, where_], flat[i + 1, where_]
+        if self.vector:
+            ok = inside & jnp.all(jnp.isfinite(v0) & jnp.isfinite(v1), axis=-1)
+            return _lerp_in_time(v0, v1, s[..., None], ok[..., None])
+        ok = inside & jnp.isfinite(v0) & jnp.isfinite(v1)
+        return _lerp_in_time(v0, v1, s, ok)
+
+
+class FieldSequence:
+    """Snapshots of an unsteady flow that stay on disk until a stretch of time needs them.
+
+    A host-side loader, not a pytree: `lidarjax.simulate_series` asks it for the snapshots
+    bracketing each chunk of LOS times (`window`) and runs the chunk on a `SnapshotField`
+    of those only, so memory holds at most `max_snapshots` snapshots whatever the run's
+    length. The readers in `lidarjax.io` build one from OpenFOAM time folders, a NetCDF
+    file with a time axis or a list of field files (`lidarjax.io.load_field_sequence`).
+
+    **Arguments:**
+
+    - `times`: ``(t,)`` snapshot times in seconds, strictly increasing, at least two.
+    - `load`: ``load(k) -> GridField``, snapshot ``k`` (all on one grid, one dtype); called
+      at most once per window for each snapshot the window lacks.
+    - `max_snapshots`: the most snapshots one window holds (at least 2); default 8.
+    - `name`: what error messages call the sequence (a path).
+    """
+
+    def __init__(self, times, load: Callable[[int], GridField], *, max_snapshots: int = 8,
+                 name: str = "FieldSequence"):
+        t = np.asarray(times, np.float64)
+        if t.ndim != 1 or t.size < 2 or not np.all(np.isfinite(t)):
+            raise ValueError(f"{name}: needs at least two finite snapshot times (s), got "
+                             f"{t.tolist() if t.size < 10 else t.shape}.")
+        if np.any(np.diff(t) <= 0):
+            k = int(np.argmax(np.diff(t) <= 0))
+            raise ValueError(f"{name}: snapshot times must be strictly increasing; "
+                             f"times[{k}]={t[k]!r} >= times[{k + 1}]={t[k + 1]!r}.")
+        if int(max_snapshots) < 2:
+            raise ValueError(f"{name}: `max_snapshots` must be at least 2, got {max_snapshots}.")
+        self.times = t
+        self.name = name
+        self.max_snapshots = int(max_snapshots)
+        self._load = load
+        self._loaded: dict[int, GridField] = {}
+
+    def __len__(self) -> int:
+        return int(self.times.size)
+
+    def __repr__(self) -> str:
+        return (f"FieldSequence({self.name!r}, {len(self)} snapshots, "
+                f"{self.times[0]:g}..{self.times[-1]:g} s)")
+
+    @property
+    def time_span(self) -> tuple[float, float]:
+        """``(first, last)`` snapshot time, s."""
+        return float(self.times[0]), float(self.times[-1])
+
+    def indices(self, t0: float, t1: float) -> tuple[int, int]:
+        """``(first, last)`` snapshot numbers whose interval(s) cover ``[t0, t1]`` (clipped
+        to the sequence; at least two snapshots)."""
+        t = self.times
+        i0 = int(np.clip(np.searchsorted(t, t0, side="right") - 1, 0, t.size - 2))
+        i1 = int(np.clip(np.searchsorted(t, t1, side="left"), i0 + 1, t.size - 1))
+        return i0, i1
+
+    def snapshot(self, k: int) -> GridField:
+        """Snapshot `k`, loaded (or reused from the current window)."""
+        k = int(k)
+        if k in self._loaded:
+            return self._loaded[k]
+        f = self._load(k)
+        if not isinstance(f, GridField) or f.velocity.ndim != 4:
+            raise ValueError(f"{self.name}: snapshot {k} (t = {self.times[k]:g} s) loaded as a "
+                             f"{type(f).__name__}, not a lidarjax.GridField.")
+        return f
+
+    def window(self, first: int, last: int, *, base: float = 0.0) -> SnapshotField:
+        """Snapshots ``first..last`` (inclusive, at most `max_snapshots`) as one
+        `SnapshotField` whose times are relative to `base` seconds (reduced in float64, so a
+        float32 window resolves its own times finely however late in the run); the
+        snapshots loaded for the previous window are reused and every other one is
+        released."""
+        first, last = int(first), int(last)
+        if not 0 <= first < last < len(self) or last - first + 1 > self.max_snapshots:
+            raise ValueError(f"{self.name}: window {first}..{last} must lie in 0..{len(self) - 1}"
+                             f" and hold 2..{self.max_snapshots} snapshots.")
+        fields = {k: self.snapshot(k) for k in range(first, last + 1)}
+        self._loaded = fields
+        try:
+            return SnapshotField(self.times[first:last + 1] - float(base), list(fields.values()))
+        except ValueError as e:
+            raise ValueError(f"{self.name}: {e}") from None

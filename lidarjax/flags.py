@@ -44,6 +44,10 @@ class Flag(enum.IntFlag):
     #: the probe's ``tail``. The LOS is finite but averages over a shorter stretch of beam
     #: (or, when no node is left, is the focus point's; see `lidarjax.probe`).
     PROBE_TRUNCATED = 32
+    #: A time-dependent field is not defined at the LOS's (or point sample's) time: it lies
+    #: outside the span of an unsteady field's snapshots (`lidarjax.SnapshotField`,
+    #: `lidarjax.FieldSequence`). The value is NaN (`lidarjax.Series.los_flags`).
+    TIME_OUTSIDE = 64
 
 
 class InverseFlag(enum.IntFlag):

@@ -33,17 +33,20 @@ directions meteorological degrees (where the wind comes from, clockwise from nor
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._backend import CPU_BATCH, default_batch
 from ._deprecated import deprecated_getattr
 from ._precision import HIGHEST, difference
 from .angles import horizontal_speed, wind_direction
-from .field import AbstractField
+from .field import AbstractField, FieldSequence
+from .flags import Flag
 from .forward import _beam_los, _validate, probe_for_field
 from .frames import (
     body_to_cfd_rotation,
@@ -77,6 +80,10 @@ class Series(eqx.Module):
     - `point_time`: ``(p,)`` s; `point_velocity`: ``(p, h, 3)`` true wind directly above the
       lidar's location at rest, north frame, m/s.
     - `start`, `duration`: the span simulated, s.
+    - `los_flags`: ``(m, h, b)`` `lidarjax.Flag` bits of each LOS: ``BEAM_OUTSIDE`` (a probe
+      node outside the field or in a solid: NaN), ``TIME_OUTSIDE`` (the LOS time lies
+      outside an unsteady field's snapshots: NaN).
+    - `point_flags`: ``(p, h)``: ``POINT_OUTSIDE`` (NaN), ``TIME_OUTSIDE``.
     """
 
     heights: Float[Array, " h"]
@@ -88,6 +95,8 @@ class Series(eqx.Module):
     point_velocity: Float[Array, "p h 3"]
     start: Float[Array, ""]
     duration: Float[Array, ""]
+    los_flags: Int[Array, "m h b"]
+    point_flags: Int[Array, "p h"]
 
     @property
     def speed(self) -> Float[Array, "n h"]:
@@ -183,13 +192,15 @@ def simulate_series(
     motion: AbstractMotion | None = None,
     point_dt: float = 1.0,
     refine_probe: bool = True,
+    chunk: int | None = None,
 ) -> Series:
     """Simulate the lidar's time series: every LOS at the time it is taken.
 
     **Arguments:**
 
-    - `field`: a time-dependent field (e.g. frozen turbulence over a mean flow; CFD frame,
-      m/s) or any steady field.
+    - `field`: a time-dependent field (frozen turbulence over a mean flow; the snapshots of
+      an unsteady CFD run, `lidarjax.SnapshotField`; CFD frame, m/s), any steady field, or a
+      `lidarjax.FieldSequence` (snapshots loaded as the run reaches them: see below).
     - `scan`, `mount`, `heights`, `probe`: as in `lidarjax.simulate`.
     - `times`: ``(start, duration)`` seconds: whole scan cycles from `start` that fit in
       `duration` (host numbers: they set the number of LOS).
@@ -202,11 +213,25 @@ def simulate_series(
       choice as `simulate`: for a turbulence box, its spacing; a pulsed probe needs 17 nodes
       for a 4 m box, where 9 alias waves shorter than about 30 m); the weighting is
       unchanged, and an explicit count wins. ``False`` keeps the probe's nodes as given.
+    - `chunk`: with a `FieldSequence`, the most LOS cycles (rows of `Series.los`) one
+      compiled call simulates; default: as many as one window of snapshots spans.
+
+    **Unsteady CFD.** A `FieldSequence` is flown through window by window: the LOS cycles
+    (and point samples) are grouped into chunks whose times fit between `max_snapshots`
+    consecutive snapshots, each chunk is simulated on a `SnapshotField` of those snapshots
+    only (times relative to the window's first snapshot, so float32 keeps its resolution
+    over long runs), and the instrument's reconstructions are built from all the LOS
+    together, exactly as from one `SnapshotField` holding every snapshot. Memory holds one
+    window (two while the next is stacked), whatever the run's length. LOS and point samples
+    outside the snapshots' span are NaN, flagged ``TIME_OUTSIDE``.
 
     **Returns:** a `Series`. Raises `ValueError` before compiling for bad inputs.
     """
     schedule = schedule_for(scan) if schedule is None else schedule
     probe = PointProbe() if probe is None else probe
+    sequence = field if isinstance(field, FieldSequence) else None
+    if sequence is not None:
+        field = sequence.window(0, min(sequence.max_snapshots, len(sequence)) - 1)
     _validate(field, scan, mount, np.asarray(heights), None, probe)
     if not isinstance(schedule, Schedule):
         raise ValueError(f"simulate_series: `schedule` must be a lidarjax.Schedule, got "
@@ -223,6 +248,10 @@ def simulate_series(
         raise ValueError(f"simulate_series: `point_dt` must be positive seconds, got {point_dt}.")
     n_points = max(int(np.floor(duration / point_dt + 1e-9)), 1)
     order = tuple(int(i) for i in schedule.order())
+    if sequence is not None:
+        return _series_over_sequence(sequence, field, scan, mount, heights, start, duration,
+                                     schedule, probe, motion, point_dt, n_cycles=n_cycles,
+                                     n_points=n_points, order=order, chunk=chunk)
     return _series_jit(field, scan, mount, heights, jnp.asarray(start, field.dtype), schedule,
                        probe, motion, jnp.asarray(point_dt, field.dtype),
                        n_cycles=n_cycles, n_points=n_points, order=order,
@@ -270,27 +299,19 @@ def _to_north(scan: Scan, mount: Mount, v_lidar):
     return rotate(to_north, v_lidar)
 
 
-def _series(field, scan, mount, heights, start, schedule, probe, motion, point_dt, *,
-            n_cycles, n_points, order, duration, repeat=1):
-    """The series; `repeat` (static) is how many records one compiled call simulates with
-    the same field (a vmapped chunk): it decides whether preparing the field's sample
-    points pays (`AbstractField.time_sampler`)."""
+def _series_los(field, scan, mount_d, origin_local, heights, t_los, probe, motion, base,
+                repeat=1):
+    """``(m, h, b)`` LOS at the times `t_los` (field time, s); `base` (s) is added for the
+    motion's clock (a `FieldSequence` window samples its field at times relative to it)."""
     dtype = field.dtype
-    cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
-    scan = jax.tree_util.tree_map(cast, scan)
-    mount_d = jax.tree_util.tree_map(cast, mount)
-    origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo, dtype)
-    h = heights.shape[0]
-    b = scan.n_beams
-    t_los = _los_times(schedule, start, n_cycles, h, dtype)  # (m, h, b)
-    m = t_los.shape[0]
+    m, h, b = t_los.shape
     beam = jnp.broadcast_to(jnp.arange(b), t_los.shape)
     hgt = jnp.broadcast_to(heights[None, :, None], t_los.shape)
     to_cfd_rest = lidar_to_cfd_rotation(mount_d)
 
     def one(t, j, z):
         """One LOS of a moving lidar: its own mount, position and velocity at time t."""
-        off, vel, att = motion.state(t)
+        off, vel, att = motion.state(t + base)
         mt = _mount_at(mount_d, att.astype(dtype))
         offset = rotate(to_cfd_rest, off.astype(dtype))
         v_lidar = rotate(to_cfd_rest, vel.astype(dtype))
@@ -301,25 +322,47 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
         los, _ = _beam_los(frozen, origin_local + offset, n[None, :], rng, probe)
         return los[0, 0] - jnp.dot(n, v_lidar, precision=HIGHEST)
 
-    if motion is None:
-        # a fixed lidar: one geometry, every cycle's (h, b) LOS at their own times at once
-        n_cfd, per_height = _geometry(scan, mount_d)
-        ranges = heights[:, None] * per_height[None, :]
+    if motion is not None:
+        return jax.vmap(one)(t_los.reshape(-1), beam.reshape(-1),
+                             hgt.reshape(-1)).reshape(m, h, b)
+    # a fixed lidar: one geometry, every cycle's (h, b) LOS at their own times at once
+    n_cfd, per_height = _geometry(scan, mount_d)
+    ranges = heights[:, None] * per_height[None, :]
 
-        # The sample points are the same at every time: the field is prepared for them once
-        # (`AbstractField.time_sampler`: frozen turbulence builds one line along the wind
-        # per point, a steady field samples them once) and sampled at every LOS time.
-        n_times = m * repeat
+    # The sample points are the same at every time: the field is prepared for them once
+    # (`AbstractField.time_sampler`: frozen turbulence builds one line along the wind
+    # per point, a steady field samples them once) and sampled at every LOS time.
+    n_times = m * repeat
 
-        def los_at(pts, dirs):
-            t = t_los[..., None] if pts.ndim == 4 else t_los  # (m, h, b[, 1])
-            return field.time_sampler(pts, dirs, n_times=n_times)(t)
+    def los_at(pts, dirs):
+        t = t_los[..., None] if pts.ndim == 4 else t_los  # (m, h, b[, 1])
+        return field.time_sampler(pts, dirs, n_times=n_times)(t)
 
-        los = _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)[0]
-    else:
-        los = jax.vmap(one)(t_los.reshape(-1), beam.reshape(-1), hgt.reshape(-1)).reshape(m, h, b)
+    return _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)[0]
 
-    # reconstructions, as the instrument builds them
+
+def _series_points(field, mount_d, origin_local, heights, t_pt, repeat=1):
+    """``(p, h, 3)`` point velocities (north frame) above the lidar's location at rest, at
+    the times `t_pt` (field time, s)."""
+    zhat = jnp.array([0.0, 0.0, 1.0], field.dtype)
+    pts = origin_local + heights[:, None] * zhat  # (h, 3)
+    v_pt = field.time_sampler(pts, n_times=t_pt.shape[0] * repeat)(t_pt[:, None])  # (p, h, 3)
+    return rotate(cfd_to_north_rotation(mount_d), v_pt)
+
+
+def _time_flags(t, span):
+    """``Flag.TIME_OUTSIDE`` where `t` lies outside `span` = ``(first, last)`` or None."""
+    if span is None:
+        return jnp.zeros(jnp.shape(t), jnp.int32)
+    outside = (t < span[0]) | (t > span[1])
+    return jnp.where(outside, int(Flag.TIME_OUTSIDE), 0).astype(jnp.int32)
+
+
+def _series_assemble(scan, mount_d, heights, t_los, los, t_pt, v_pt, schedule, motion, start,
+                     span, *, order, duration):
+    """The reconstructions (as the instrument builds them) and flags of a series."""
+    dtype = los.dtype
+    m, h, b = los.shape
     if schedule.update == "each_los":
         los_w, t_rec = _sliding_windows(los, t_los, order)
     else:
@@ -335,16 +378,153 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
         v_north = jax.vmap(jax.vmap(lambda a, v: _to_north(scan, _mount_at(mount_d, a.astype(dtype)),
                                                            v)))(att, v_lidar)
     velocity = jnp.where(ok[..., None], v_north, jnp.nan)
-
-    # point sensors above the lidar's location at rest
-    t_pt = start + jnp.arange(n_points, dtype=dtype) * point_dt
-    zhat = jnp.array([0.0, 0.0, 1.0], dtype)
-    pts = origin_local + heights[:, None] * zhat  # (h, 3)
-    v_pt = field.time_sampler(pts, n_times=n_points * repeat)(t_pt[:, None])  # (p, h, 3)
-    v_pt = rotate(cfd_to_north_rotation(mount_d), v_pt)
+    time_los = _time_flags(t_los, span)
+    los_flags = time_los | jnp.where(jnp.isfinite(los) | (time_los != 0), 0,
+                                     int(Flag.BEAM_OUTSIDE)).astype(jnp.int32)
+    time_pt = _time_flags(jnp.broadcast_to(t_pt[:, None], v_pt.shape[:-1]), span)
+    pt_nan = ~jnp.all(jnp.isfinite(v_pt), axis=-1)
+    point_flags = time_pt | jnp.where(pt_nan & (time_pt == 0), int(Flag.POINT_OUTSIDE),
+                                      0).astype(jnp.int32)
     return Series(heights=heights, los_time=t_los, los=los, time=t_rec, velocity=velocity,
                   point_time=t_pt, point_velocity=v_pt, start=start,
-                  duration=jnp.asarray(duration, dtype))
+                  duration=jnp.asarray(duration, dtype), los_flags=los_flags,
+                  point_flags=point_flags)
+
+
+def _prepare(field, scan, mount):
+    dtype = field.dtype
+    cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
+    scan = jax.tree_util.tree_map(cast, scan)
+    mount_d = jax.tree_util.tree_map(cast, mount)
+    origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo,
+                              dtype)
+    return scan, mount_d, origin_local
+
+
+def _series(field, scan, mount, heights, start, schedule, probe, motion, point_dt, *,
+            n_cycles, n_points, order, duration, repeat=1):
+    """The series; `repeat` (static) is how many records one compiled call simulates with
+    the same field (a vmapped chunk): it decides whether preparing the field's sample
+    points pays (`AbstractField.time_sampler`)."""
+    dtype = field.dtype
+    scan, mount_d, origin_local = _prepare(field, scan, mount)
+    t_los = _los_times(schedule, start, n_cycles, heights.shape[0], dtype)  # (m, h, b)
+    zero = jnp.zeros((), dtype)
+    los = _series_los(field, scan, mount_d, origin_local, heights, t_los, probe, motion, zero,
+                      repeat)
+    t_pt = start + jnp.arange(n_points, dtype=dtype) * point_dt
+    v_pt = _series_points(field, mount_d, origin_local, heights, t_pt, repeat)
+    return _series_assemble(scan, mount_d, heights, t_los, los, t_pt, v_pt, schedule, motion,
+                            start, field.time_span, order=order, duration=duration)
+
+
+def _los_times_host(schedule: Schedule, start: float, n_cycles: int, n_heights: int):
+    """`_los_times` in float64 on the host."""
+    bt = np.asarray(schedule.beam_times, np.float64)
+    period, refocus = float(np.asarray(schedule.period)), float(np.asarray(schedule.refocus))
+    if not schedule.heights_sequential:
+        cycle = period
+        t = start + np.arange(n_cycles)[:, None, None] * cycle + bt[None, None, :]
+        return np.broadcast_to(t, (n_cycles, n_heights, bt.size))
+    rot = schedule.rotations_per_height
+    visit = rot * period + refocus
+    cycle = n_heights * visit
+    t = (start + np.arange(n_cycles)[:, None, None, None] * cycle
+         + np.arange(rot)[None, :, None, None] * period
+         + np.arange(n_heights)[None, None, :, None] * visit + bt[None, None, None, :])
+    return t.reshape(n_cycles * rot, n_heights, bt.size)
+
+
+def _windows(times: np.ndarray, lo: np.ndarray, hi: np.ndarray, width: int, most: int | None,
+             what: str, name: str):
+    """Group items with time ranges ``[lo_k, hi_k]`` (sorted by ``lo``) into consecutive
+    chunks that fit in a window of `width` consecutive snapshots: ``[(first_snapshot,
+    first_item, stop_item)]``. Ranges are clipped to the snapshots' span (items outside it
+    are NaN in any window)."""
+    n_t = times.size
+    lo, hi = np.clip(lo, times[0], times[-1]), np.clip(hi, times[0], times[-1])
+    out, k, n = [], 0, lo.size
+    while k < n:
+        i0 = int(np.clip(np.searchsorted(times, lo[k], side="right") - 1, 0, n_t - 2))
+        i0 = min(i0, n_t - width)
+        end = times[i0 + width - 1]
+        if hi[k] > end:
+            raise ValueError(
+                f"simulate_series: one {what} of the scan spans {lo[k]:g}..{hi[k]:g} s, more "
+                f"than {width} consecutive snapshots of {name}; raise its `max_snapshots`.")
+        stop = int(np.searchsorted(hi, end, side="right"))  # hi is sorted with lo
+        stop = max(stop, k + 1)
+        if most is not None:
+            stop = min(stop, k + most)
+        out.append((i0, k, stop))
+        k = stop
+    return out
+
+
+def _series_over_sequence(sequence: FieldSequence, first_window, scan, mount, heights, start,
+                          duration, schedule, probe, motion, point_dt, *, n_cycles, n_points,
+                          order, chunk):
+    """`simulate_series` through a `FieldSequence`, window by window (see there)."""
+    dtype = first_window.dtype
+    times = sequence.times
+    width = min(sequence.max_snapshots, times.size)
+    h = int(heights.shape[0])
+    t_los = _los_times_host(schedule, start, n_cycles, h)  # (m, h, b) float64
+    rows_lo, rows_hi = t_los.min(axis=(1, 2)), t_los.max(axis=(1, 2))
+    t_pt = start + np.arange(n_points) * float(point_dt)
+    los_chunks = _windows(times, rows_lo, rows_hi, width, chunk, "LOS cycle", sequence.name)
+    pt_chunks = _windows(times, t_pt, t_pt, width, None, "point sample", sequence.name)
+    rows = max(c[2] - c[1] for c in los_chunks)
+    n_pt = max(c[2] - c[1] for c in pt_chunks)
+    # both kinds of chunk in time order: consecutive windows share their snapshots
+    jobs = sorted([(c[0], 0, c) for c in los_chunks] + [(c[0], 1, c) for c in pt_chunks])
+    los = np.empty(t_los.shape, dtype)
+    v_pt = np.empty((n_points, h, 3), dtype)
+    field = first_window
+    for i0, kind, (_, k0, k1) in jobs:
+        base = float(times[i0])
+        field = sequence.window(i0, i0 + width - 1, base=base)
+        if kind == 0:
+            t = t_los[k0:k1]
+            t = np.concatenate([t, np.repeat(t[-1:], rows - t.shape[0], axis=0)])
+            out = _los_chunk_jit(field, scan, mount, heights, jnp.asarray(t - base, dtype),
+                                 probe, motion, jnp.asarray(base, dtype))
+            los[k0:k1] = np.asarray(out)[:k1 - k0]
+        else:
+            t = t_pt[k0:k1]
+            t = np.concatenate([t, np.repeat(t[-1:], n_pt - t.size)])
+            out = _points_chunk_jit(field, mount, heights, jnp.asarray(t - base, dtype))
+            v_pt[k0:k1] = np.asarray(out)[:k1 - k0]
+    del field
+    span = tuple(jnp.asarray(v, dtype) for v in sequence.time_span)
+    return _assemble_jit(scan, mount, heights, jnp.asarray(t_los, dtype), jnp.asarray(los),
+                         jnp.asarray(t_pt, dtype), jnp.asarray(v_pt), schedule, motion,
+                         jnp.asarray(start, dtype), span, order=order, duration=float(duration))
+
+
+@jax.jit
+def _los_chunk_jit(field, scan, mount, heights, t_los, probe, motion, base):
+    scan, mount_d, origin_local = _prepare(field, scan, mount)
+    return _series_los(field, scan, mount_d, origin_local, heights, t_los, probe, motion, base)
+
+
+@jax.jit
+def _points_chunk_jit(field, mount, heights, t_pt):
+    mount_d = jax.tree_util.tree_map(lambda a: jnp.asarray(a).astype(field.dtype), mount)
+    origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo,
+                              field.dtype)
+    return _series_points(field, mount_d, origin_local, heights, t_pt)
+
+
+@functools.partial(jax.jit, static_argnames=("order", "duration"))
+def _assemble_jit(scan, mount, heights, t_los, los, t_pt, v_pt, schedule, motion, start, span, *,
+                  order, duration):
+    dtype = los.dtype
+    cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
+    scan = jax.tree_util.tree_map(cast, scan)
+    mount_d = jax.tree_util.tree_map(cast, mount)
+    return _series_assemble(scan, mount_d, heights, t_los, los, t_pt, v_pt, schedule, motion,
+                            start, span, order=order, duration=duration)
 
 
 _series_jit = jax.jit(_series, static_argnames=("n_cycles", "n_points", "order", "duration"))

@@ -12,6 +12,8 @@
   `lidarjax.GridField`.
 - `openfoam`: OpenFOAM case directories (mesh + `U`, ASCII/binary/gzip) and OpenFOAM's own
   cellPoint interpolation at arbitrary points (`sample_openfoam`).
+- `snapshots`: unsteady CFD runs (OpenFOAM time directories, NetCDF with a time axis, one
+  file per snapshot) as one time-dependent field (`load_field_sequence`).
 - `vtk`: VTK unstructured meshes (`.vtu`, `.vtk`, `.vtm`; extra ``meshio``).
 - `hpl`, `windcube_scan`, `scan_netcdf`: scanning lidars (Halo `.hpl`, Windcube 200S/400S
   NetCDF; CF NetCDF of scans, time x beam x range).
@@ -87,6 +89,7 @@ from .seed_output import write_table_csv as write_table_csv
 from .settings import Settings as Settings
 from .settings import read_settings as read_settings
 from .settings import write_settings as write_settings
+from .snapshots import load_field_sequence as load_field_sequence
 from .sta import STA_FIELDS as STA_FIELDS
 from .sta import StaRecord as StaRecord
 from .sta import read_sta as read_sta

@@ -266,8 +266,11 @@ def test_stack_mounts_concatenates_batches_keeps_dtypes_and_checks_items():
 
 def test_ten_thousand_rotations_build_in_well_under_seconds():
     """Issue 18: a batched Mount from arrays, and `stack_mounts` of 10,000 single mounts, in
-    well under a few seconds (the old pairwise stack took 264 s for 10,000). Bounds are
-    generous for a noisy 2-core CI machine; this CPU measures about 0.02 s and 0.5 s."""
+    well under a few seconds (the old pairwise stack took 264 s for 10,000, quadratic in the
+    count). Wall-clock bounds on a shared 2-core CI machine are noisy (a loaded run measured
+    3.2 s where an idle one takes 0.3 s), so the test asserts what the fix is about: linear
+    cost (10,000 mounts cost at most 25 times 1,000, best of two runs after the one-time
+    compilation; quadratic would be 100 times) and a loose absolute bound."""
     import time
 
     n = 10_000
@@ -278,11 +281,21 @@ def test_ten_thousand_rotations_build_in_well_under_seconds():
     jax.block_until_ready(batched)
     t_arrays = time.perf_counter() - t
     singles = [lj.Mount(locs[k], beta=betas[k], psi=180.0) for k in range(n)]
-    t = time.perf_counter()
-    stacked = lj.stack_mounts(singles)
-    jax.block_until_ready(stacked)
-    t_stack = time.perf_counter() - t
-    assert t_arrays < 3.0 and t_stack < 3.0, (t_arrays, t_stack)
+
+    def best_of_two(mounts):
+        times = []
+        for _ in range(2):
+            t = time.perf_counter()
+            out = lj.stack_mounts(mounts)
+            jax.block_until_ready(out)
+            times.append(time.perf_counter() - t)
+        return min(times), out
+
+    best_of_two(singles[:1024])  # compiles the grouped stack once
+    t_small, _ = best_of_two(singles[:1000])
+    t_stack, stacked = best_of_two(singles)
+    assert t_arrays < 3.0 and t_stack < 10.0, (t_arrays, t_stack)
+    assert t_stack < 25.0 * t_small + 0.2, (t_small, t_stack)
     for x, y in zip(jax.tree_util.tree_leaves(batched), jax.tree_util.tree_leaves(stacked),
                     strict=True):
         np.testing.assert_array_equal(x, y)
