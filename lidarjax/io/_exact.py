@@ -43,8 +43,8 @@ class CellPointField(AbstractField):
 
     - `grid`: the `GridField` resampled from the mesh (its `origin` and `resolution` are this
       field's; it answers every query that is not a prepared point).
-    - `points`: ``(n, 3)`` the prepared points, absolute CFD metres (e.g. the
-      `lidarjax.monitor_points` of the mounts to be simulated).
+    - `points`: ``(n, 3)`` the prepared points, absolute CFD metres (e.g. `simulate_points`
+      of the mount to be simulated).
     - `vertices`: ``(n, 4, 3)`` absolute CFD metres: the cellPoint tetrahedron holding each
       point (cell centre, then three face points); NaN rows for a point in no cell.
     - `values`: ``(n, 4, 3)`` m/s, CFD frame: the cell value and the three point values at
@@ -187,8 +187,8 @@ def cellpoint_field(
     - `grid`: the `GridField` resampled from it (`resample_openfoam`), answering every other
       query.
     - `points`: ``(n, 3)`` absolute CFD metres: the points `simulate` will sample, e.g.
-      ``lidarjax.monitor_points(scan, mount, heights, lidarjax.probe_for_field(grid, scan,
-      heights, probe)).points``.
+      ``simulate_points(scan, mount, heights, lidarjax.probe_for_field(grid, scan, heights,
+      probe))`` (several mounts: their points stacked).
     - `tolerance`: see `CellPointField`.
 
     **Returns:** a `CellPointField`.
