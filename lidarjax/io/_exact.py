@@ -94,10 +94,11 @@ class CellPointField(AbstractField):
         self.grid = grid
         self.origin, self.origin_lo = grid.origin, grid.origin_lo
         o64 = np.asarray(grid.origin, np.float64) + np.asarray(grid.origin_lo, np.float64)
-        local = pts - o64
+        local = (pts - o64).astype(dtype)
+        stored = o64 + local.astype(np.float64)  # the points as kept, rounded to the dtype
         # barycentric coordinates relative to each point: lam(1..3) = inverse @ (q - p - anchor)
         found = np.isfinite(vert).all(axis=(1, 2)) & np.isfinite(val).all(axis=(1, 2))
-        rel = np.where(found[:, None, None], vert - pts[:, None, :], 0.0)
+        rel = np.where(found[:, None, None], vert - stored[:, None, :], 0.0)
         edges = np.stack([rel[:, k] - rel[:, 0] for k in (1, 2, 3)], axis=2)  # columns
         det = np.linalg.det(edges)
         scale = np.max(np.abs(edges), axis=(1, 2)) ** 3
@@ -107,16 +108,16 @@ class CellPointField(AbstractField):
             inv[found] = np.linalg.inv(edges[found])
         if tolerance is None:
             rel_tol = 1e-9 if np.dtype(dtype).itemsize >= 8 else 2e-5
-            tolerance = rel_tol * max(1.0, float(np.linalg.norm(local, axis=1).max()))
+            tolerance = rel_tol * max(1.0, float(np.linalg.norm(pts - o64, axis=1).max()))
         tol = float(tolerance)
         if not tol > 0:
             raise ValueError(f"CellPointField: `tolerance` must be positive metres, got {tolerance!r}")
-        proj = local @ _KEY
+        proj = (local.astype(np.float64) * _KEY).sum(axis=1)
         order = np.argsort(proj, kind="stable")
         sp = proj[order]
         count = np.searchsorted(sp, sp + 2 * tol, side="right") - np.arange(sp.size)
         self.window = max(4, int(count.max()))
-        self.points_local = jnp.asarray(local.astype(dtype))
+        self.points_local = jnp.asarray(local)
         self.anchor = jnp.asarray(np.where(found[:, None], rel[:, 0], 0.0).astype(dtype))
         self.inverse = jnp.asarray(inv.astype(dtype))
         self.values = jnp.asarray(np.where(found[:, None, None], val, 0.0).astype(dtype))
@@ -144,8 +145,8 @@ class CellPointField(AbstractField):
 
     def _match(self, points):
         """Index of the nearest prepared point `(...)` and whether it is within tolerance."""
-        key = jnp.asarray(_KEY, self.dtype)
-        p = points @ key
+        # elementwise products, never a `dot`: a GPU may run a float32 dot in TF32
+        p = jnp.sum(points * jnp.asarray(_KEY, self.dtype), axis=-1)
         method = "compare_all" if self.n_points <= 4096 else "scan"
         start = jnp.searchsorted(self.projection, p - self.tolerance, side="left", method=method)
         idx = jnp.clip(start[..., None] + jnp.arange(self.window), 0, self.n_points - 1)
@@ -162,9 +163,9 @@ class CellPointField(AbstractField):
         points = jnp.asarray(points).astype(self.dtype)
         best, hit = self._match(jax.lax.stop_gradient(points))
         d = points - self.points_local[best] - self.anchor[best]
-        lam = jnp.einsum("...ij,...j->...i", self.inverse[best], d)
+        lam = jnp.sum(self.inverse[best] * d[..., None, :], axis=-1)
         lam = jnp.concatenate([1 - jnp.sum(lam, axis=-1, keepdims=True), lam], axis=-1)
-        exact = jnp.einsum("...k,...kc->...c", lam, self.values[best])
+        exact = jnp.sum(lam[..., None] * self.values[best], axis=-2)
         found = self.found[best]
         exact = jnp.where(found[..., None], exact, jnp.nan)  # values are finite: NaN put in last
         return jnp.where(hit[..., None], exact, self.grid.sample_local(points))
