@@ -9,7 +9,7 @@ constant series) with an optional platform `lidarjax.motion` motion:
 1. LOS times ``(m, h, b)`` from the schedule (``m`` cycles, or rotations for sequential
    heights); each LOS is the probe-weighted projection of the field *at its own time* along
    the beam of the mount *at that time* (the forward model's probe quadrature,
-   `lidarjax.forward._beam_los`, on the field frozen at that instant), minus the
+   `lidarjax.probe._beam_los`, on the field frozen at that instant), minus the
    lidar's own velocity along the beam;
 2. reconstructions as the instrument builds them (`Schedule.update`): Windcube, after each
    new LOS from the latest LOS of every beam (so consecutive vectors share 4 of 5 LOS and
@@ -47,7 +47,7 @@ from ._precision import HIGHEST, difference
 from .angles import horizontal_speed, wind_direction
 from .field import AbstractField, FieldSequence
 from .flags import Flag
-from .forward import _beam_los, _validate, probe_for_field
+from .forward import _validate, probe_for_field
 from .frames import (
     body_to_cfd_rotation,
     cfd_to_north_rotation,
@@ -58,8 +58,10 @@ from .frames import (
 )
 from .motion import AbstractMotion
 from .mount import Mount
-from .probe import AbstractProbe, PointProbe
+from .probe import AbstractProbe, PointProbe, _beam_los
 from .scan import Scan, reconstruct
+from .scanning.pattern import ScanPattern
+from .scanning.simulate import simulate_scan_series
 from .timing import Schedule, schedule_for
 
 __all__ = ["Series", "SeriesStatistics", "simulate_series", "statistics", "simulate_statistics",
@@ -111,7 +113,7 @@ class Series(eqx.Module):
 
 class _AtTime(AbstractField):
     """A field frozen at given times: lets the forward model's probe quadrature
-    (`lidarjax.forward._beam_los`) sample a time-dependent field unchanged. `time` is a
+    (`lidarjax.probe._beam_los`) sample a time-dependent field unchanged. `time` is a
     scalar or one time per beam focus ``(h, b)``; the quadrature's extra node axis (points
     ``(h, b, q, 3)``) shares its focus' time."""
 
@@ -182,9 +184,9 @@ def _sliding_windows(los, t_los, order):
 
 def simulate_series(
     field: AbstractField,
-    scan: Scan,
+    scan: Scan | ScanPattern,
     mount: Mount,
-    heights: Float[ArrayLike, " h"],
+    heights: Float[ArrayLike, " h"] | None,
     times: tuple[float, float],
     *,
     schedule: Schedule | None = None,
@@ -201,7 +203,10 @@ def simulate_series(
     - `field`: a time-dependent field (frozen turbulence over a mean flow; the snapshots of
       an unsteady CFD run, `lidarjax.SnapshotField`; CFD frame, m/s), any steady field, or a
       `lidarjax.FieldSequence` (snapshots loaded as the run reaches them: see below).
-    - `scan`, `mount`, `heights`, `probe`: as in `lidarjax.simulate`.
+    - `scan`, `mount`, `heights`, `probe`: as in `lidarjax.simulate`. A scanning pattern
+      (`lidarjax.ppi`, ...; ``heights=None``, no `schedule`: it has its own gates and timing)
+      is flown through the field by `lidarjax.simulate_scan_series` for every whole
+      repetition of the pattern in `times`, and its `ScanResult` is returned.
     - `times`: ``(start, duration)`` seconds: whole scan cycles from `start` that fit in
       `duration` (host numbers: they set the number of LOS).
     - `schedule`: the scan timing (default `lidarjax.timing.schedule_for(scan)`).
@@ -227,6 +232,8 @@ def simulate_series(
 
     **Returns:** a `Series`. Raises `ValueError` before compiling for bad inputs.
     """
+    if isinstance(scan, ScanPattern):
+        return _scan_series(field, scan, mount, heights, times, schedule, probe, motion)
     schedule = schedule_for(scan) if schedule is None else schedule
     probe = PointProbe() if probe is None else probe
     sequence = field if isinstance(field, FieldSequence) else None
@@ -416,6 +423,50 @@ def _series(field, scan, mount, heights, start, schedule, probe, motion, point_d
     v_pt = _series_points(field, mount_d, origin_local, heights, t_pt, repeat)
     return _series_assemble(scan, mount_d, heights, t_los, los, t_pt, v_pt, schedule, motion,
                             start, field.time_span, order=order, duration=duration)
+
+
+def _scan_series(field, pattern, mount, heights, times, schedule, probe, motion):
+    """`simulate_series` of a scanning pattern: `lidarjax.simulate_scan_series` over the
+    whole repetitions of the pattern that fit in `times` = (start, duration)."""
+    if heights is not None or schedule is not None:
+        raise ValueError("simulate_series: a scanning pattern has its own range gates and "
+                         "timing; pass heights=None and no schedule (simulate_series(field, "
+                         "pattern, mount, None, (start, duration))).")
+    try:
+        start, duration = (float(np.asarray(v)) for v in times)
+    except (TypeError, ValueError):
+        raise ValueError("simulate_series: `times` must be (start, duration) in seconds.") from None
+    period = float(np.asarray(pattern.period))
+    n_scans = int(np.floor(duration / period + 1e-9))
+    if not (np.isfinite(start) and np.isfinite(duration)) or n_scans < 1:
+        raise ValueError(f"simulate_series: the span (start={start}, duration={duration} s) must "
+                         f"be finite and hold at least one repetition of the scan ({period:g} s).")
+    if not isinstance(field, FieldSequence):
+        return simulate_scan_series(field, pattern, mount, n_scans=n_scans, start=start,
+                                    probe=probe, motion=motion)
+    # through unsteady CFD: the repetitions in chunks that fit a window of snapshots
+    if motion is not None:
+        raise ValueError("simulate_series: a scanning pattern on a moving platform through a "
+                         "FieldSequence is not supported; use one SnapshotField.")
+    seq = field
+    width = min(seq.max_snapshots, len(seq))
+    lo = start + np.arange(n_scans) * period
+    parts = []
+    for i0, k0, k1 in _windows(seq.times, lo, lo + period, width, None, "scan repetition",
+                               seq.name):
+        base = float(seq.times[i0])
+        window = seq.window(i0, i0 + width - 1, base=base)
+        res = simulate_scan_series(window, pattern, mount, n_scans=k1 - k0,
+                                   start=float(lo[k0]) - base, probe=probe)
+        parts.append(eqx.tree_at(lambda r: r.times, res, res.times + jnp.asarray(base, res.times.dtype)))
+    res = parts[0]
+    los = jnp.concatenate([p.los for p in parts], axis=-3)
+    t = jnp.concatenate([p.times for p in parts], axis=-2)
+    flags = jnp.concatenate([p.flags for p in parts], axis=-3)
+    t0, t1 = seq.time_span
+    outside = ((t < t0) | (t > t1))[..., None]
+    flags = jnp.where(outside, int(Flag.TIME_OUTSIDE), flags).astype(flags.dtype)
+    return eqx.tree_at(lambda r: (r.los, r.times, r.flags), res, (los, t, flags))
 
 
 def _los_times_host(schedule: Schedule, start: float, n_cycles: int, n_heights: int):

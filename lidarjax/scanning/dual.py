@@ -33,10 +33,9 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from .._precision import difference, is_concrete
 from ..field import AbstractField
 from ..flags import InverseFlag
-from ..forward import _beam_los
 from ..frames import body_to_cfd_rotation, rotate
 from ..mount import Mount
-from ..probe import AbstractProbe, PointProbe, probe_for_ranges
+from ..probe import AbstractProbe, PointProbe, _beam_los, probe_for_ranges
 
 __all__ = ["DualDoppler", "CrossingGeometry", "crossing_geometry", "dual_doppler",
            "simulate_dual_doppler", "DUAL_ILL_CONDITIONED"]

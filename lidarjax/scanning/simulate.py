@@ -25,11 +25,10 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from .._precision import difference, is_concrete
 from ..field import AbstractField, DirectSampler
 from ..flags import Flag
-from ..forward import _beam_los
 from ..frames import body_to_cfd_rotation, lidar_to_cfd_rotation, rotate
 from ..motion import AbstractMotion
 from ..mount import Mount
-from ..probe import AbstractProbe, PointProbe, probe_for_ranges
+from ..probe import AbstractProbe, PointProbe, _beam_los, probe_for_ranges
 from .pattern import ScanPattern
 
 __all__ = ["ScanResult", "simulate_scan", "simulate_scan_series"]
