@@ -110,6 +110,7 @@ from .scan import nacelle_2beam as nacelle_2beam
 from .scan import nacelle_4beam as nacelle_4beam
 from .scan import nacelle_shear as nacelle_shear
 from .scan import reconstruct as reconstruct
+from .scan import six_beam as six_beam
 from .scan import windcube_v1 as windcube_v1
 from .scan import windcube_v2 as windcube_v2
 from .scan import zephir as zephir
@@ -148,6 +149,9 @@ from .spectral import lidar_response as lidar_response
 from .spectral import lidar_variance as lidar_variance
 from .spectral import lidar_variance_ratio as lidar_variance_ratio
 from .spectral import reconstruction_coefficients as reconstruction_coefficients
+from .stresses import ReynoldsStresses as ReynoldsStresses
+from .stresses import reynolds_stresses as reynolds_stresses
+from .stresses import stress_matrix as stress_matrix
 from .timing import Schedule as Schedule
 from .timing import schedule_for as schedule_for
 from .turbulence import TurbulenceBox as TurbulenceBox

@@ -35,6 +35,12 @@ them with your instrument's):
   time taken as 0 by default; one sine fit per height visit from the 150 LOS (ZephIR 300
   data sheet and Sathe et al. 2011). The ZephIR's extra reference height (38 m) of every
   cycle is not simulated: give it as one of the heights if you need its time.
+- The 6-beam scan (`lidarjax.six_beam`, ``"least_squares"`` over 5 beams at 45 degrees
+  from the vertical, 72 degrees apart, then the vertical beam): the Windcube V2's optics in
+  a 6-beam pattern, 1 s per LOS (the V2's ~1 Hz LOS rate above, an assumption: Sathe et
+  al. 2015 measured the 6-beam method with a WindScanner, whose timing differs), 6 s per
+  cycle, updated after each LOS from the latest 6 LOS. The Reynolds stresses use the LOS
+  themselves (`lidarjax.reynolds_stresses`), not these reconstructions.
 - ``"least_squares"``: treated as a pulsed lidar with 1 s per LOS, one reconstruction per
   LOS from the latest LOS of every beam.
 
@@ -152,8 +158,9 @@ def _float(value):
 
 def schedule_for(scan: Scan, *, seconds_per_los: float | None = None) -> Schedule:
     """The default `Schedule` of a scan, by its reconstruction method (module docs):
-    Windcube V1 1.5 s per LOS, V2 1 s per LOS (sliding reconstruction); ZephIR 1 s per
-    rotation of its LOS, 3 rotations per height, heights in turn. `seconds_per_los`
+    Windcube V1 1.5 s per LOS, V2 and the 6-beam scan (`lidarjax.six_beam`) 1 s per LOS
+    (sliding reconstruction); ZephIR 1 s per rotation of its LOS, 3 rotations per height,
+    heights in turn. `seconds_per_los`
     overrides the time per LOS (for the conical scan: the rotation is ``b`` LOS)."""
     b = scan.n_beams
     if scan.method == "sine_fit":
