@@ -205,15 +205,16 @@ else:  # the reader of an older revision, saved as a module file
     sys.modules[spec.name] = old
     spec.loader.exec_module(old)
     reader = old.read_vtk_field
-t0 = time.perf_counter()
+c0, t0 = time.process_time(), time.perf_counter()
 of = reader(path)
-t1 = time.perf_counter()
+c1, t1 = time.process_time(), time.perf_counter()
 axes, vel, info = resample_openfoam(of, (lo, hi), None)
-t2 = time.perf_counter()
+c2, t2 = time.process_time(), time.perf_counter()
 if out_npz:
     np.savez(out_npz, x=axes[0], y=axes[1], z=axes[2], velocity=vel)
 hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM")]
-print("RESULT" + json.dumps(dict(read_s=t1 - t0, resample_s=t2 - t1, load_s=t2 - t0,
+print("RESULT" + json.dumps(dict(read_s=t1 - t0, resample_s=t2 - t1, load_s=t2 - t0, read_cpu_s=c1 - c0,
+      resample_cpu_s=c2 - c1, load_cpu_s=c2 - c0,
       n_cells=int(of.mesh.n_cells), n_faces=int(of.mesh.n_faces), n_cells_used=int(info["n_cells_used"]),
       grid=list(vel.shape[:3]), peak_rss_gb=int(hwm[0].split()[1]) / 1e6 if hwm else float("nan"))))
 """
@@ -286,7 +287,8 @@ def run_vtk(case: Path, vtu: Path, repeats: int, baseline: str | None, baseline_
                     entry[key] = {"error": rs[0].get("error", "") if rs else "not run"}
                     continue
                 entry[key] = {f: float(np.median([x[f] for x in ok]))
-                              for f in ("read_s", "resample_s", "load_s")}
+                              for f in ("read_s", "resample_s", "load_s", "read_cpu_s", "resample_cpu_s",
+                                        "load_cpu_s")}
                 entry[key].update({f"{f}_all": [x[f] for x in ok] for f in ("read_s", "load_s")})
                 entry[key].update({f: ok[0][f] for f in ("n_cells", "n_faces", "n_cells_used", "grid")})
                 entry[key]["peak_rss_gb"] = float(max(x["peak_rss_gb"] for x in ok))
@@ -318,7 +320,9 @@ def write_vtk_md(res: dict, path: Path | None = None) -> list[str]:
              f"lidarjax imported, not timed), paths interleaved, medians of {v['repeats']} "
              "(the baseline: of its own repeats). read = `read_openfoam_field` / `read_vtk_field`; "
              "resample = `resample_openfoam` on the region of the lidar's `scan_bounds` "
-             "(what `load_field(path, region=...)` does, less building the `GridField`).", "",
+             "(what `load_field(path, region=...)` does, less building the `GridField`). Wall seconds, "
+             "and in brackets the process's CPU seconds (less sensitive to the other work on a shared "
+             "machine).", "",
              "| lidar | path | cells | faces | cells used | grid | read s | resample s | load s | peak GB |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for lidar, e in v["lidars"].items():
@@ -327,12 +331,17 @@ def write_vtk_md(res: dict, path: Path | None = None) -> list[str]:
             if "load_s" not in r:
                 lines.append(f"| {lidar} | {k} | - | - | - | - | - | - | - | {r.get('error', '')[:60]} |")
                 continue
+            t = " | ".join(f"{r[f + '_s']:.2f} ({r.get(f + '_cpu_s', float('nan')):.2f})"
+                           for f in ("read", "resample", "load"))
             lines.append(f"| {lidar} | {k} | {r['n_cells']:,} | {r['n_faces']:,} | {r['n_cells_used']:,} | "
-                         f"{'x'.join(map(str, r['grid']))} | {r['read_s']:.2f} | {r['resample_s']:.2f} | "
-                         f"{r['load_s']:.2f} | {r['peak_rss_gb']:.2f} |")
+                         f"{'x'.join(map(str, r['grid']))} | {t} | {r['peak_rss_gb']:.2f} |")
     lines.append("")
     for lidar, e in v["lidars"].items():
         c = e.get("vtk_vs_openfoam", {})
+        if "grids" in c:
+            lines.append(f"- {lidar}: the `.vtu` grid ({'x'.join(map(str, c['grids'][0][:3]))}) is not the "
+                         f"case's ({'x'.join(map(str, c['grids'][1][:3]))}): the automatic axes are built "
+                         "from the mesh's own points, float32 in the .vtu")
         if "max_abs" in c:
             lines.append(f"- {lidar}: `.vtu` grid against the case's: NaN nodes the same: {c['same_nan']}; "
                          f"max |diff| {c['max_abs']:.3g} m/s, rms {c['rms']:.3g} m/s (foamToVTK's float32 "
