@@ -8,7 +8,23 @@ true north) and ``elevation`` (degrees above the horizon), per ray and gate ``ra
 ``radial_wind_speed_status`` (1 accepted, 0 rejected), plus ``range_gate_length`` (m),
 ``ray_accumulation_time`` (ms) and ``sweep_mode`` (ppi, rhi, dbs, fixed, ...). The rays of
 all sweeps are concatenated in time order. A file without these is refused in one line
-naming it and what is missing.
+naming it and what is missing. When present, the instrument's own products are read too
+(per ray and gate, NaN where absent): ``measurement_height`` (m above the instrument),
+``horizontal_wind_speed`` (m/s), ``wind_direction`` (degrees, where the wind comes from,
+clockwise from true north), ``vertical_wind_speed`` (m/s, up) and ``wind_speed_status``.
+
+Angles and ranges are read as stored: ``azimuth``/``elevation`` are the scanning head's
+encoder angles at the end of each ray, ``range`` the gate centres the processing used. The
+two need not agree. In the committed Windcube 200S DBS (server 3.3.0, rays N, vertical, S, W,
+E) the processing gated and reconstructed the rays as if their elevations were
+``(75, 75, 75, 75, 90)`` while the head reported ``(75, 90, 75, 75, 75)``: `range_elevation()`
+recovers the processing's elevation, ``arcsin(measurement_height / range)``. The encoder
+angles are the physical ones (over the 69 sweeps of the source day the vertical-labelled
+ray sees a mean of -0.05 m/s and the east ray +1.98 m/s, antisymmetric to the west ray's
+-2.02 m/s), so fit the LOS with `azimuth`/`elevation`; the file's ``horizontal_wind_speed``
+is the least-squares DBS fit with `range_elevation()` (the east ray taken as vertical),
+reproduced to the 0.01 m/s the file stores, and over-reads a uniform wind by
+``1 + s / (2 s^2 + 1) = 1.337`` (``s = sin 75 deg``). See docs/scanning.md, "Real files".
 """
 
 from __future__ import annotations
@@ -30,10 +46,15 @@ _GATE_VARS = ("range", "radial_wind_speed")
 class WindcubeScan:
     """A Windcube scanning file (``r`` rays of all sweeps, ``g`` gates; numpy arrays).
 
-    `time` ``(r,)`` ``datetime64[us]``, end of each ray; `azimuth`, `elevation` ``(r,)``
-    degrees; `ranges` ``(r, g)`` m; `radial_wind_speed`, `cnr` (dB), `status` (bool,
-    accepted) ``(r, g)``; `sweep` ``(r,)`` sweep number; `gate_length` (m);
-    `accumulation` (s per ray); `sweep_mode`; `instrument`; `path`.
+    `time` ``(r,)`` ``datetime64[us]``, end of each ray; `azimuth` (clockwise from true
+    north), `elevation` (above the horizon) ``(r,)`` degrees, the head's encoder angles;
+    `ranges` ``(r, g)`` m, the gate centres the processing used; `radial_wind_speed` (m/s,
+    positive away from the lidar), `cnr` (dB), `status` (bool, accepted) ``(r, g)``; `sweep`
+    ``(r,)`` sweep number; `gate_length` (m); `accumulation` (s per ray); `sweep_mode`;
+    `instrument`; `path`. The instrument's products ``(r, g)``, NaN (False) where the file
+    has none: `measurement_height` (m above the instrument), `horizontal_wind_speed` (m/s),
+    `wind_direction` (degrees, from, clockwise from true north), `vertical_wind_speed` (m/s,
+    up), `wind_status` (bool, accepted).
     """
 
     path: str
@@ -49,6 +70,11 @@ class WindcubeScan:
     cnr: np.ndarray
     status: np.ndarray
     sweep: np.ndarray
+    measurement_height: np.ndarray
+    horizontal_wind_speed: np.ndarray
+    wind_direction: np.ndarray
+    vertical_wind_speed: np.ndarray
+    wind_status: np.ndarray
 
     def radial_velocity(self, *, cnr_threshold: float | None = None,
                         use_status: bool = True) -> np.ndarray:
@@ -60,6 +86,20 @@ class WindcubeScan:
         if cnr_threshold is not None:
             keep &= self.cnr >= cnr_threshold
         return np.where(keep, self.radial_wind_speed, np.nan)
+
+    def range_elevation(self) -> np.ndarray:
+        """Elevation ``(r,)`` degrees that the processing used for each ray: ``arcsin`` of the
+        least-squares ratio ``sum(h r) / sum(r^2)`` of `measurement_height` ``h`` to `ranges`
+        ``r`` over the ray's gates where both are finite (ranges are stored in whole metres:
+        good to about 0.01 degree at 75 degrees over 20 gates); NaN for a ray without
+        ``measurement_height``. Where it differs from `elevation`, the file's gates and wind
+        products were computed for another elevation than the head's (module docs)."""
+        h, r = self.measurement_height, self.ranges
+        ok = np.isfinite(h) & np.isfinite(r)
+        num = np.sum(np.where(ok, h * r, 0.0), axis=1)
+        den = np.sum(np.where(ok, r * r, 0.0), axis=1)
+        ratio = num / np.where(den > 0, den, np.nan)
+        return np.degrees(np.arcsin(np.clip(ratio, -1.0, 1.0)))
 
     def seconds(self) -> np.ndarray:
         """Ray end times in seconds from the first ray's end ``(r,)``."""
@@ -121,12 +161,21 @@ def read_windcube_scan(path: PathLike) -> WindcubeScan:
                       "radial_wind_speed_status" in ds else np.ones(rng.shape, bool))
             cnr = (np.asarray(ds["cnr"].values, np.float64) if "cnr" in ds
                    else np.full(rng.shape, np.nan))
+            products = {}
+            for key, var in (("measurement_height", "measurement_height"),
+                             ("horizontal_wind_speed", "horizontal_wind_speed"),
+                             ("wind_direction", "wind_direction"),
+                             ("vertical_wind_speed", "vertical_wind_speed")):
+                products[key] = (np.broadcast_to(np.asarray(ds[var].values, np.float64), rng.shape)
+                                 if var in ds else np.full(rng.shape, np.nan))
+            products["wind_status"] = (np.asarray(ds["wind_speed_status"].values) == 1
+                                       if "wind_speed_status" in ds else np.zeros(rng.shape, bool))
             parts.append(dict(
                 time=base + np.round(secs * 1e6).astype("timedelta64[us]"),
                 azimuth=np.asarray(ds["azimuth"].values, np.float64),
                 elevation=np.asarray(ds["elevation"].values, np.float64), ranges=rng,
                 radial_wind_speed=np.asarray(ds["radial_wind_speed"].values, np.float64),
-                cnr=cnr, status=status, sweep=np.full(n, k),
+                cnr=cnr, status=status, sweep=np.full(n, k), **products,
                 gate_length=float(ds["range_gate_length"].values) if "range_gate_length" in ds else np.nan,
                 accumulation=(float(ds["ray_accumulation_time"].values) * 1e-3
                               if "ray_accumulation_time" in ds else np.nan),
@@ -135,7 +184,9 @@ def read_windcube_scan(path: PathLike) -> WindcubeScan:
     if len(shapes) > 1:
         raise file_error(p, None, f"sweeps have different gate counts {sorted(shapes)}")
     cat = {k: np.concatenate([q[k] for q in parts]) for k in
-           ("time", "azimuth", "elevation", "ranges", "radial_wind_speed", "cnr", "status", "sweep")}
+           ("time", "azimuth", "elevation", "ranges", "radial_wind_speed", "cnr", "status", "sweep",
+            "measurement_height", "horizontal_wind_speed", "wind_direction", "vertical_wind_speed",
+            "wind_status")}
     order = np.argsort(cat["time"], kind="stable")
     cat = {k: v[order] for k, v in cat.items()}
     return WindcubeScan(path=str(p), instrument=instrument, sweep_mode=parts[0]["mode"],
