@@ -154,6 +154,11 @@ def test_point_probe_recovers_the_set_covariance_exactly(point_series):
         cov = np.cov(v[:, ih].T, bias=True)
         np.testing.assert_allclose(r.vector_stress[0, ih], _six(cov), rtol=1e-10, atol=1e-12)
     assert np.max(np.abs(np.asarray(r.vector_stress[0]) - _six(c))) > 0.1 * c[0, 0]
+    # the .sta statistics of the same series: the mean wind of the sliding reconstructions
+    st = lidarjax.statistics(point_series)
+    np.testing.assert_allclose(st.direction[0], 250.0, atol=0.5)
+    np.testing.assert_allclose(st.availability[0], 100.0)
+    np.testing.assert_allclose(st.w_std[0] ** 2, r.vector_stress[0, :, 2], rtol=1e-9)
 
 
 @pytest.mark.parametrize("angles, compensated", [
@@ -316,8 +321,14 @@ def test_gradient_matches_finite_differences(point_series):
 # ------------------------------------------------------------------------------------------
 # a Mann box: the retrieval against the box sampled directly at the beams' points
 # ------------------------------------------------------------------------------------------
-MANN_SHAPE, MANN_DX, MANN_U, MANN_SEEDS = (128, 16, 16), 8.0, 9.73, 10
+MANN_SHAPE, MANN_DX, MANN_U, MANN_SEEDS = (128, 16, 16), 8.0, 9.73, 24
 MANN_HEIGHTS = [40.0, 80.0]
+
+
+@eqx.filter_jit
+def _sample_at(field, points, times):
+    """The field's velocity (CFD frame) sampled directly at points and times."""
+    return field.sample_local_at(points, times)
 
 
 @pytest.fixture(scope="module")
@@ -336,8 +347,8 @@ def mann_ensemble():
         r, rp = reynolds_stresses(s, SCAN, LEVEL), reynolds_stresses(sp, SCAN, LEVEL)
         t = np.asarray(s.los_time)  # (m, h, b)
         pts = np.asarray(MANN_HEIGHTS)[:, None, None] / n[None, :, 2:3] * n[None]  # (h, b, 3)
-        v = np.asarray(f.sample_local_at(jnp.broadcast_to(jnp.asarray(pts), t.shape + (3,)),
-                                         jnp.asarray(t)))  # (m, h, b, 3), CFD = north here
+        v = np.asarray(_sample_at(f, jnp.broadcast_to(jnp.asarray(pts), t.shape + (3,)),
+                                  jnp.asarray(t)))  # (m, h, b, 3), CFD = north here
         dv = v - v.mean(axis=0)
         cov = np.einsum("mhbi,mhbj->hbij", dv, dv) / v.shape[0]
         out.append((np.asarray(r.stress[0]), np.asarray(rp.stress[0]),
@@ -350,8 +361,9 @@ def test_mann_box_point_probe_recovers_stresses_to_sampling_error(mann_ensemble)
     beam's LOS variance is n^T C_b n with C_b the covariance of the box sampled at that
     beam's points and times (to rounding). The 6-beam retrieval assumes every beam sees the
     same stresses; in one record the six beams' lines through the box differ by the
-    sampling error of a 1 km line (about 20 % of sigma_u^2 per stress), which M^-1
-    (absolute row sums up to 4) carries into each record. Over the ensemble the retrieval error
+    sampling error of a 1 km line (each beam's own variance scatters by about 15 % of
+    sigma_u^2), which M^-1 (absolute row sums up to 4) carries into each record: rms
+    errors of 0.1-0.3 sigma_u^2 per record. Over the ensemble the retrieval error
     against the beams' mean covariance has no bias: every component's mean error is
     within 4 standard errors of 0."""
     n = np.asarray(SCAN.directions())
@@ -363,7 +375,8 @@ def test_mann_box_point_probe_recovers_stresses_to_sampling_error(mann_ensemble)
     errors = np.asarray(errors)  # (records, 6), sigma_u = 1 m/s
     mean, sem = errors.mean(axis=0), errors.std(axis=0, ddof=1) / np.sqrt(len(errors))
     assert np.all(np.abs(mean) < 4 * sem), (mean, sem)
-    assert np.all(np.abs(errors).max(axis=0) < 1.0)  # within sigma_u^2 in every record
+    # the per-record scatter is that sampling error (rms 0.11-0.32 sigma_u^2 by component)
+    assert np.all(np.sqrt(np.mean(errors**2, axis=0)) < 0.5), np.sqrt(np.mean(errors**2, axis=0))
 
 
 def test_mann_box_pulsed_probe_attenuates_the_stresses(mann_ensemble):
