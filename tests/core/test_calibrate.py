@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import lidarjax as lj
+from lidarjax.calibrate import _model_and_jacobian
 
 from .. import _campaign as cp
 
@@ -89,3 +90,34 @@ def test_calibrate_refuses_bad_arguments(table):
         lj.calibrate(los, bare)
     with pytest.raises(ValueError, match="reference"):
         lj.calibrate(los, table, reference=(np.zeros((2, 3)), np.zeros((2, 3))))
+
+
+@pytest.mark.parametrize("with_reference", [False, True])
+def test_calibration_model_jacobians_match_central_differences(table, with_reference):
+    # the closed-form Jacobians the Gauss-Newton passes use, in the nuisances and the
+    # offsets, against central differences of the same model (direction, tilt and north
+    # offset all away from zero)
+    rng = np.random.default_rng(5)
+    n = 6
+    hidx = np.arange(n) % HEIGHTS.size
+    ref_dir = rng.uniform(0, 360, n)
+    beta = rng.uniform(4, 12, (n, 1)) if with_reference else rng.uniform(-9, 9, (n, 2))
+    theta = np.array([2.0, 0.7, -0.4])
+    sp = table.response_spline
+    ctx = ((sp.start, sp.offsets, sp.widths, sp.uniform), sp.coefficients,
+           table.beam_velocity_spline.coefficients, "beam", table.beam_vectors,
+           np.array([EPS0, 0.0, 0.0]))
+    model, jb, jt = _model_and_jacobian(beta, theta, ref_dir, hidx, ctx)
+    eps = 1e-6
+    for k in range(beta.shape[1]):
+        e = np.zeros_like(beta)
+        e[:, k] = eps
+        fd = (_model_and_jacobian(beta + e, theta, ref_dir, hidx, ctx)[0]
+              - _model_and_jacobian(beta - e, theta, ref_dir, hidx, ctx)[0]) / (2 * eps)
+        np.testing.assert_allclose(jb[..., k], fd, rtol=1e-6, atol=1e-7)
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = eps
+        fd = (_model_and_jacobian(beta, theta + e, ref_dir, hidx, ctx)[0]
+              - _model_and_jacobian(beta, theta - e, ref_dir, hidx, ctx)[0]) / (2 * eps)
+        np.testing.assert_allclose(jt[..., k], fd, rtol=1e-6, atol=1e-7)
