@@ -4,9 +4,13 @@ The file is text: a header of ``key:<TAB>value`` lines up to a line starting wit
 then per ray one line ``decimal_time azimuth elevation pitch roll`` (hours since midnight of
 the start date, degrees) followed by one line per gate ``gate doppler intensity beta
 [spectral_width]`` (gate index from 0; Doppler m/s, positive away from the lidar; intensity
-SNR + 1; attenuated backscatter m-1 sr-1). Gate centres lie at ``(gate + 1/2) * gate_length``
-(the header's "Range of measurement (center of gate)"). Decimal hours that wrap past midnight
-are continued (``+ 24 h`` when a ray's time drops by more than 12 h).
+SNR + 1; attenuated backscatter m-1 sr-1). Gate centres follow the header's "Range (or
+Altitude) of measurement (center of gate)" line: ``(range gate + 0.5) * Gate length``
+(contiguous gates, the usual one and the default when the line is absent) or, with
+overlapping gates, ``Gate length / 2 + (range gate x d)``, gates ``d`` metres apart (one
+sampling point, 3 m, in the committed RHI: 18 m gates every 3 m); a formula in neither form
+is refused rather than guessed. Decimal hours that wrap past midnight are continued
+(``+ 24 h`` when a ray's time drops by more than 12 h).
 
 `read_hpl` refuses a malformed file with one line naming the file and line (a header field
 missing or unreadable, a ray line or gate line that is not numbers, gates out of order, a
@@ -55,8 +59,9 @@ class HaloScan:
     `pulses_per_ray`, `n_rays`, `scan_type`, `focus_range`, `start_time`
     (``datetime64[us]``), `resolution` (m/s), `header` (all fields, as text).
     Per ray: `time` (``datetime64[us]``), `decimal_hours`, `azimuth`, `elevation`, `pitch`,
-    `roll` (degrees). Per gate: `ranges` ``(g,)`` gate centres (m); `doppler`, `intensity`,
-    `beta` ``(r, g)``; `spectral_width` ``(r, g)`` or None.
+    `roll` (degrees). Per gate: `ranges` ``(g,)`` gate centres (m, from the header's range
+    formula; `gate_spacing` m apart, `gate_length` for contiguous gates, less when they
+    overlap); `doppler`, `intensity`, `beta` ``(r, g)``; `spectral_width` ``(r, g)`` or None.
     """
 
     path: str
@@ -78,6 +83,7 @@ class HaloScan:
     pitch: np.ndarray
     roll: np.ndarray
     ranges: np.ndarray
+    gate_spacing: float
     doppler: np.ndarray
     intensity: np.ndarray
     beta: np.ndarray
@@ -117,9 +123,10 @@ class HaloScan:
 
 
 def _kind(scan_type: str) -> str:
-    s = scan_type.lower()
+    # whole words: "RHI - overlapping" holds "ppi" inside "overlapping"
+    words = re.findall(r"[a-z]+", scan_type.lower())
     for key in ("stare", "vad", "ppi", "rhi"):
-        if key in s:
+        if key in words:
             return key
     return "custom"
 
@@ -164,6 +171,7 @@ def read_hpl(path: PathLike) -> HaloScan:
     except ValueError:
         raise file_error(p, _line_of(lines, "Start time"), f"start time {header['start time']!r} is "
                          f"not 'YYYYMMDD HH:MM:SS.ss'") from None
+    first, spacing = _gate_layout(p, lines[:end], gate_length)
     rays, gates = [], []
     i = end + 1
     while i < len(lines):
@@ -203,8 +211,30 @@ def read_hpl(path: PathLike) -> HaloScan:
         scan_type=header["scan type"], focus_range=_opt_float(header.get("focus range")),
         start_time=np.datetime64(start, "us"), resolution=_opt_float(header.get("resolution (m/s)")),
         time=time, decimal_hours=hours, azimuth=ray[:, 1], elevation=ray[:, 2], pitch=ray[:, 3],
-        roll=ray[:, 4], ranges=(np.arange(n_gates) + 0.5) * gate_length, doppler=data[..., 0],
+        roll=ray[:, 4], ranges=first + spacing * np.arange(n_gates), gate_spacing=spacing,
+        doppler=data[..., 0],
         intensity=data[..., 1], beta=data[..., 2], spectral_width=width)
+
+
+_CONTIGUOUS = "(rangegate+0.5)*gatelength"
+_OVERLAPPING = re.compile(r"^gatelength/2\+\(rangegate[x*]([0-9]*\.?[0-9]+)\)$")
+
+
+def _gate_layout(p, header_lines, gate_length):
+    """(first gate centre, spacing) in m from the header's "(center of gate)" formula."""
+    for i, line in enumerate(header_lines):
+        if "center of gate" not in line.lower() or "=" not in line:
+            continue
+        formula = "".join(line.split("=", 1)[1].split()).lower()
+        if formula == _CONTIGUOUS:
+            return 0.5 * gate_length, gate_length
+        match = _OVERLAPPING.match(formula)
+        if match and float(match.group(1)) > 0:
+            return 0.5 * gate_length, float(match.group(1))
+        raise file_error(p, i + 1, f"gate-centre formula {line.split('=', 1)[1].strip()!r} is "
+                         "neither '(range gate + 0.5) * Gate length' nor 'Gate length / 2 + "
+                         "(range gate x d)'")
+    return 0.5 * gate_length, gate_length
 
 
 def _line_of(lines, prefix):

@@ -1,6 +1,7 @@
-"""Halo StreamLine `.hpl` files: the committed real cuts (tests/data/scanning/README.md),
-checked against a plain independent parse, simulated in the same layout, and malformed
-variants refused in one line naming the file and line."""
+"""Halo StreamLine `.hpl` files: the committed real cuts (tests/data/scanning/README.md: a
+stare, a VAD and an RHI with overlapping gates), checked against a plain independent parse,
+simulated in the same layout, and malformed variants refused in one line naming the file
+and line."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from ..helpers import DATA
 
 STARE = DATA / "scanning" / "Stare_91_20221214_12.hpl"
 VAD = DATA / "scanning" / "VAD_194_20210624_170110_cut.hpl"
+RHI = DATA / "scanning" / "RHI_77_20260921_000812.hpl"
 
 
 def _plain(path):
@@ -25,8 +27,12 @@ def _plain(path):
     return body, rays
 
 
-@pytest.mark.parametrize("path", [STARE, VAD])
-def test_real_files_match_an_independent_parse(path):
+@pytest.mark.parametrize("path, first, spacing", [
+    (STARE, 24.0, 48.0),  # (gate + 0.5) * 48 m
+    (VAD, 15.0, 30.0),  # (gate + 0.5) * 30 m
+    (RHI, 9.0, 3.0),  # 18 m / 2 + gate x 3 m: overlapping gates, one 3 m sampling point apart
+])
+def test_real_files_match_an_independent_parse(path, first, spacing):
     scan = read_hpl(path)
     body, rays = _plain(path)
     assert scan.n_rays == len(rays)
@@ -38,7 +44,8 @@ def test_real_files_match_an_independent_parse(path):
         np.testing.assert_allclose(scan.doppler[k], gates[:, 1])
         np.testing.assert_allclose(scan.intensity[k], gates[:, 2])
         np.testing.assert_allclose(scan.beta[k], gates[:, 3])
-    np.testing.assert_allclose(scan.ranges, (np.arange(scan.n_gates) + 0.5) * scan.gate_length)
+    np.testing.assert_allclose(scan.ranges, first + spacing * np.arange(scan.n_gates))
+    assert scan.gate_spacing == spacing
 
 
 def test_header_fields_and_threshold():
@@ -77,6 +84,50 @@ def test_simulated_scan_in_the_real_layout():
     assert 0 < np.max(np.abs(np.asarray(tilted.los) - np.asarray(res.los))) < 0.1
 
 
+def test_real_rhi_geometry_and_simulation_in_its_layout():
+    """The Trier RHI (system 77): one azimuth, elevations stepped 0 to 45 degrees by 15,
+    18 m gates every 3 m, rays 4.2 to 4.3 s apart (2 s accumulations: step and stare). Its
+    layout simulated in a linearly sheared wind gives, per gate, the LOS at the gate centre
+    (the pulsed average of a linear field along the beam is exact), computed here with
+    numpy from the file's angles and ranges; same ranges, same ray times."""
+    r = read_hpl(RHI)
+    assert r.scan_type == "RHI - overlapping" and r.system_id == "77"
+    assert (r.n_rays, r.n_gates, r.gate_length, r.gate_points) == (4, 20, 18.0, 6)
+    np.testing.assert_array_equal(r.azimuth, 255.0)
+    np.testing.assert_array_equal(r.elevation, [0.0, 15.0, 30.0, 45.0])
+    assert np.all(np.abs(r.pitch) < 0.2) and np.all(np.abs(r.roll) < 0.25)
+    gaps = np.diff(r.seconds())
+    assert np.all((gaps > 4.1) & (gaps < 4.4)) and r.accumulation() == 2.0
+    # as in the other committed files, the header's start time is after the first ray's time
+    assert 1.0 < (r.start_time - r.time[0]) / np.timedelta64(1, "s") < 1.1
+    p = r.pattern()
+    assert p.kind == "rhi"
+    v0, grad = np.array([-6.0, -2.0, 0.1]), np.zeros((3, 3))
+    grad[0, 2], grad[1, 2], grad[0, 0] = 0.05, -0.02, 0.003  # du/dz, dv/dz, du/dx (1/s)
+    field = lj.scenes.linear(v0, grad)
+    probe = lj.instrument_probe(gate_length=r.gate_length)
+    res = lj.simulate_scan(field, p, lj.Mount([0.0, 0.0, 0.0]), probe=probe)
+    assert res.los.shape == r.doppler.shape == (4, 20)
+    np.testing.assert_allclose(np.asarray(res.ranges), r.ranges)
+    end = (r.time - r.reference_time()) / np.timedelta64(1, "us") * 1e-6
+    np.testing.assert_allclose(np.asarray(res.times) + r.accumulation() / 2, end, atol=1e-6)
+    a, e = np.radians(r.azimuth), np.radians(r.elevation)
+    n = np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=1)  # (r, 3)
+    pts = r.ranges[None, :, None] * n[:, None, :]  # (r, g, 3) gate centres
+    expect = np.einsum("ri,rgi->rg", n, v0 + pts @ grad.T)
+    np.testing.assert_allclose(np.asarray(res.points), pts, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(res.los), expect, atol=1e-10)
+    # gates this near the lidar: the pulse reaches it and is cut symmetrically (still exact
+    # for a linear field), flagged on the near gates only
+    flags = np.asarray(res.flags)
+    near = (flags & int(lj.Flag.PROBE_TRUNCATED)) != 0
+    assert np.all(near == near[:1]) and 0 < near[0].sum() < r.n_gates
+    assert np.all(near[0] == (np.arange(r.n_gates) < near[0].sum()))
+    # the RHI plane: every gate centre in the vertical plane through azimuth 255
+    normal = np.array([np.cos(a[0]), -np.sin(a[0]), 0.0])
+    np.testing.assert_allclose(np.asarray(res.points) @ normal, 0.0, atol=1e-9)
+
+
 def _corrupt(tmp_path, path, fn):
     lines = path.read_text().splitlines()
     out = tmp_path / path.name
@@ -102,6 +153,14 @@ def test_malformed_files_refused_in_one_line(tmp_path, edit, where):
     assert "\n" not in msg and str(bad) in msg
     if where is not None:
         assert f"line {where}:" in msg, msg
+
+
+def test_unknown_gate_centre_formula_refused(tmp_path):
+    bad = _corrupt(tmp_path, RHI, lambda ls: [x.replace("(range gate x 3)", "(range gate ^ 2)")
+                                              for x in ls])
+    with pytest.raises(ValueError, match=r"line 12: gate-centre formula") as err:
+        read_hpl(bad)
+    assert "\n" not in str(err.value) and str(bad) in str(err.value)
 
 
 def test_empty_and_missing_files(tmp_path):
