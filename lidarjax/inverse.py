@@ -948,8 +948,9 @@ def invert_joint_reconstructed(
     """`invert_joint` from the instrument's reported speed and direction per height
     (``.sta``): the reported horizontal vector of each height is modelled as
     ``U * profile(z_h, a) * Rrec_h(d, a)`` with the tables' `reconstructed` response (the
-    two components as two "beams"). `speed` (m/s, negative: NaN flagged
-    `IMPOSSIBLE_INPUT`), `direction` (degrees) ``(..., h)``; `noise` per component (m/s);
+    two components as two "beams"). `speed` (m/s; a negative speed is impossible:
+    that height is dropped and the record flagged `IMPOSSIBLE_INPUT`, never read as the
+    opposite direction), `direction` (degrees) ``(..., h)``; `noise` per component (m/s);
     other arguments as `invert_joint`. Needs two heights or more."""
     _need_profile_table(table, "invert_joint_reconstructed")
     if table.reconstructed_spline is None:

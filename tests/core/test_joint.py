@@ -191,3 +191,40 @@ def test_invert_joint_derivatives_match_finite_differences(table, noisy):
                     np.asarray(out.parameter)])
     fd = (got[:, :3] - got[:, 3:6]) / (2 * eps)
     np.testing.assert_allclose(np.asarray(tangent), fd, rtol=1e-5, atol=1e-7)
+
+
+def _dbs(los):
+    """The Windcube's reconstruction from its beams (lidar frame = north frame here):
+    ``u = (S1 - S3) / (2 sin c)``, ``v = (S0 - S2) / (2 sin c)``, ``w`` the vertical beam."""
+    s = 2.0 * np.sin(np.deg2rad(cp.CONE))
+    return np.stack([(los[..., 1] - los[..., 3]) / s, (los[..., 0] - los[..., 2]) / s,
+                     los[..., 4]], -1)
+
+
+def test_invert_joint_reconstructed_recovers_reported_winds():
+    tables = []
+    for a in ALPHAS:
+        resp, vel, beams = cp.table_runs(DIRECTIONS, HEIGHTS, a, Z_REF)
+        tables.append(lj.ResponseTable(DIRECTIONS, resp, reconstructed=_dbs(resp),
+                                       heights=HEIGHTS))
+    table = lj.ProfileTable("alpha", ALPHAS, tables, profile=lj.PowerLawProfile(Z_REF),
+                            per_reference_speed=True)
+    rng = np.random.default_rng(9)
+    los, truth = cp.campaign(rng, 24, HEIGHTS, Z_REF, alpha=(0.02, 0.28), sigma=0.0)
+    rec = _dbs(los)  # what a .sta file reports, per height
+    speed = np.hypot(rec[..., 0], rec[..., 1])
+    direction = np.rad2deg(np.arctan2(-rec[..., 0], -rec[..., 1])) % 360
+    speed[5, 2] = -1.0  # impossible: that height is dropped and the record flagged
+    speed[7] = np.nan  # nothing reported: the record is refused, the others not
+    out = lj.invert_joint_reconstructed(table, speed, direction, noise=0.05)
+    flags = np.asarray(out.flags)
+    assert flags[5] == lj.InverseFlag.IMPOSSIBLE_INPUT and bool(out.converged[5])
+    assert not bool(out.converged[7]) and flags[7] & lj.InverseFlag.TOO_FEW_BEAMS
+    ok = np.ones(24, bool)
+    ok[7] = False
+    assert np.all(np.asarray(out.converged)[ok]) and np.all(flags[ok & (np.arange(24) != 5)] == 0)
+    # the remaining error is the direction spline's (runs every 10 degrees)
+    np.testing.assert_allclose(np.asarray(out.speed)[ok], truth["speed_ref"][ok], rtol=2e-4)
+    np.testing.assert_allclose(np.asarray(out.parameter)[ok], truth["alpha"][ok], atol=2e-3)
+    dd = (np.asarray(out.direction) - truth["direction"] + 180) % 360 - 180
+    assert np.max(np.abs(dd[ok])) < 0.02
