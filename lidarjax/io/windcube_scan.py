@@ -19,9 +19,9 @@ two need not agree. In the committed Windcube 200S DBS (server 3.3.0, rays N, ve
 E) the processing gated and reconstructed the rays as if their elevations were
 ``(75, 75, 75, 75, 90)`` while the head reported ``(75, 90, 75, 75, 75)``: `range_elevation()`
 recovers the processing's elevation, ``arcsin(measurement_height / range)``. The encoder
-angles are the physical ones (over the 69 sweeps of the source day the vertical-labelled
-ray sees a mean of -0.05 m/s and the east ray +1.98 m/s, antisymmetric to the west ray's
--2.02 m/s), so fit the LOS with `azimuth`/`elevation`; the file's ``horizontal_wind_speed``
+angles are the physical ones (over the source's 69 sweeps the vertical-labelled ray sees a
+mean of -0.05 m/s and the east ray +1.98 m/s, antisymmetric to the west ray's -2.02 m/s),
+so fit the LOS with `azimuth`/`elevation`; the file's ``horizontal_wind_speed``
 is the least-squares DBS fit with `range_elevation()` (the east ray taken as vertical),
 reproduced to the 0.01 m/s the file stores, and over-reads a uniform wind by
 ``1 + s / (2 s^2 + 1) = 1.337`` (``s = sin 75 deg``). See docs/scanning.md, "Real files".
@@ -108,8 +108,8 @@ class WindcubeScan:
     def pattern(self) -> ScanPattern:
         """The file's layout as a `ScanPattern` (rays at its angles, accumulations ending at
         its times; seconds from the first ray's start, one accumulation before its time).
-        Needs the same ranges on every ray (a 200S DBS file gives the vertical ray other
-        ranges: use its rays apart)."""
+        Needs the same ranges on every ray (the committed 200S DBS gives two of its rays
+        other ranges, module docs: use rays of one elevation and ranges)."""
         r0 = self.ranges[0]
         if not np.allclose(self.ranges, r0[None], atol=1e-6):
             raise ValueError(f"{self.path}: rays have different gate ranges; a ScanPattern needs the "
