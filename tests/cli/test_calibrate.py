@@ -107,7 +107,12 @@ def test_correct_joint_recovers_records_and_falls_back_without_profile_axis(case
     out = case / "j.csv"
     assert main(["correct", "--table", str(case / "profile.npz"), "--records",
                  str(case / "j.rtd"), "--joint", "--min-availability", "0", "--quiet",
-                 "--out", str(out), "--no-netcdf"]) == 0
+                 "--out", str(out)]) == 0
+    assert out.with_suffix(".nc").is_file()
+    body = [r.split(",") for r in out.read_text().splitlines() if not r.startswith(("#", "time"))]
+    speeds = np.array([float(r[2]) for r in body]).reshape(n, -1)  # per record and height
+    np.testing.assert_allclose(speeds, u[:, None] * (h / Z_REF)[None, :] ** a[:, None],
+                               rtol=1e-4)
     rows = [r.split(",") for r in (case / "j_profile.csv").read_text().splitlines()
             if not r.startswith(("#", "time"))]
     got = np.array([[float(r[1]), float(r[2]), float(r[3])] for r in rows])
