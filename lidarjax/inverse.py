@@ -249,6 +249,34 @@ def default_solver(dtype=None) -> optx.AbstractLeastSquaresSolver:
     return optx.GaussNewton(rtol=tol, atol=tol, linear_solver=lx.Normal(lx.Cholesky()))
 
 
+def _in_batches(run, los, w_r, noise, per_batch, n_real):
+    """``run((los, w_r, noise))`` over the records (leading axis) in batches of `per_batch`
+    (None: all at once): padded to whole batches, mapped with `jax.lax.map`, and batches
+    holding only padding (beyond `n_real` records) skipped by `jax.lax.cond`."""
+    n, h, b = los.shape
+    if per_batch is None or n <= per_batch:
+        out = run((los, w_r, noise))
+    else:
+        pad = (-n) % per_batch
+        xs = (
+            jnp.concatenate([los, jnp.zeros((pad, h, b), los.dtype)]),
+            jnp.concatenate([w_r, jnp.zeros((pad, h, b), w_r.dtype)]),
+            jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)]),
+        )
+        xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
+        shapes = jax.eval_shape(run, jax.tree_util.tree_map(lambda x: x[0], xs))
+        skipped = lambda x: jax.tree_util.tree_map(  # noqa: E731
+            lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+
+        def one_batch(args):
+            k, x = args
+            return jax.lax.cond(k * per_batch < n_real, run, skipped, x)
+
+        out = jax.lax.map(one_batch, (jnp.arange(xs[0].shape[0]), xs))
+        out = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:])[:n], out)
+    return out
+
+
 def _solve_batch(los, w, noise, values, knots, geom, coefficients, cfg):
     """Records ``(r, h, b)``: start from the table densely, then solve every record-height."""
     r, h, b = los.shape
@@ -295,26 +323,7 @@ def _invert_core(spline, values, knots, valid, los, weights, noise, cfg, per_bat
     def run(x):
         return _solve_batch(*x, values, knots, geom, spline.coefficients, cfg)
 
-    if per_batch is None or n <= per_batch:
-        out = run((los, w_r, noise))
-    else:
-        pad = (-n) % per_batch
-        xs = (
-            jnp.concatenate([los, jnp.zeros((pad, h, b), los.dtype)]),
-            jnp.concatenate([w_r, jnp.zeros((pad, h, b), w_r.dtype)]),
-            jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)]),
-        )
-        xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
-        shapes = jax.eval_shape(run, jax.tree_util.tree_map(lambda x: x[0], xs))
-        skipped = lambda x: jax.tree_util.tree_map(  # noqa: E731
-            lambda s: jnp.zeros(s.shape, s.dtype), shapes)
-
-        def one_batch(args):
-            k, x = args
-            return jax.lax.cond(k * per_batch < n_real, run, skipped, x)
-
-        out = jax.lax.map(one_batch, (jnp.arange(xs[0].shape[0]), xs))
-        out = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:])[:n], out)
+    out = _in_batches(run, los, w_r, noise, per_batch, n_real)
     return Inversion(**out)
 
 
@@ -784,26 +793,7 @@ def _joint_core(ctx, values, knots, valid, los, weights, noise, cfg, per_batch, 
     def run(x):
         return _joint_batch(*x, values, knots, ctx, cfg)
 
-    if per_batch is None or n <= per_batch:
-        out = run((los, w_r, noise))
-    else:
-        pad = (-n) % per_batch
-        xs = (
-            jnp.concatenate([los, jnp.zeros((pad, h, b), los.dtype)]),
-            jnp.concatenate([w_r, jnp.zeros((pad, h, b), w_r.dtype)]),
-            jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)]),
-        )
-        xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
-        shapes = jax.eval_shape(run, jax.tree_util.tree_map(lambda x: x[0], xs))
-        skipped = lambda x: jax.tree_util.tree_map(  # noqa: E731
-            lambda s: jnp.zeros(s.shape, s.dtype), shapes)
-
-        def one_batch(args):
-            k, x = args
-            return jax.lax.cond(k * per_batch < n_real, run, skipped, x)
-
-        out = jax.lax.map(one_batch, (jnp.arange(xs[0].shape[0]), xs))
-        out = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:])[:n], out)
+    out = _in_batches(run, los, w_r, noise, per_batch, n_real)
     return JointInversion(**out)
 
 
