@@ -1,7 +1,6 @@
 """Test configuration: float64 everywhere unless a test is about float32."""
 
 import os
-import tempfile
 
 import jax
 import numpy as np
@@ -9,15 +8,6 @@ import pytest
 from hypothesis import settings
 
 jax.config.update("jax_enable_x64", True)
-# The suite is dominated by compilation, and many test files compile the same computations
-# (the forward model, the inversion) in separate functions or worker processes: XLA's
-# persistent cache lets each be compiled once per machine. Keyed by the computation and
-# the jax version; `LIDARJAX_TEST_JAX_CACHE=` (empty) turns it off.
-_jax_cache = os.environ.get("LIDARJAX_TEST_JAX_CACHE",
-                            os.path.join(tempfile.gettempdir(), "lidarjax-test-jax-cache"))
-if _jax_cache:
-    jax.config.update("jax_compilation_cache_dir", _jax_cache)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.3)
 
 # CI runs are reproducible: the same examples every run (locally hypothesis explores freely).
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
