@@ -238,7 +238,14 @@ def simulate_series(
     probe = PointProbe() if probe is None else probe
     sequence = field if isinstance(field, FieldSequence) else None
     if sequence is not None:
-        field = sequence.window(0, min(sequence.max_snapshots, len(sequence)) - 1)
+        # the window the run starts in: validated here, reused by the first chunk
+        width = min(sequence.max_snapshots, len(sequence))
+        try:
+            first = sequence.indices(float(np.asarray(times[0])), float(np.asarray(times[0])))[0]
+        except (TypeError, ValueError, IndexError):
+            first = 0  # `_check_span` below names the bad span
+        first = min(first, len(sequence) - width)
+        field = sequence.window(first, first + width - 1)
     _validate(field, scan, mount, np.asarray(heights), None, probe)
     if not isinstance(schedule, Schedule):
         raise ValueError(f"simulate_series: `schedule` must be a lidarjax.Schedule, got "

@@ -144,6 +144,11 @@ def test_sequence_loads_a_window_at_a_time_and_equals_all_snapshots(linear_snaps
     # first window read before compiling (validation)
     needed = set(range(0, 15))
     assert set(loaded) <= needed and len(loaded) <= len(needed) + 3
+    # a run late in the sequence reads only the snapshots around it
+    loaded.clear()
+    late = lj.FieldSequence(SNAP_TIMES, load, max_snapshots=3, name="linear run")
+    lj.simulate_series(late, SCAN, MOUNT, HEIGHTS, (42.0, 10.0))
+    assert min(loaded) >= 10 and len(set(loaded)) <= 5, loaded
 
 
 def test_times_outside_the_snapshots_are_nan_and_flagged(linear_snapshots):
