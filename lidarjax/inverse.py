@@ -369,10 +369,12 @@ def _broadcast_input(name, value, shape, dtype, what):
         ) from None
 
 
-def _run(spline, values, knots, valid, los, weights, noise, *, min_beams, max_steps, solver,
-         batch_size, fname, unit):
+def _los_inputs(los, weights, noise, default_dtype, fname, unit):
+    """The LOS (or reported winds) in their floating dtype (else `default_dtype`), the
+    weights broadcast to them (NaN -> 0, refused if negative or infinite) and the noise
+    broadcast to ``(..., h)`` (NaN: estimate it; refused if not positive)."""
     los = jnp.asarray(los)
-    dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else values.dtype
+    dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else default_dtype
     los = los.astype(dtype)
     shape = los.shape
     if weights is None:
@@ -393,6 +395,13 @@ def _run(spline, values, knots, valid, los, weights, noise, *, min_beams, max_st
         noise = _broadcast_input("noise", noise, shape[:-1], dtype, "(..., h)")
         if is_concrete(noise) and np.any(~(np.asarray(noise) > 0)):
             raise ValueError(f"{fname}: `noise` must be positive (m/s), or None to estimate it.")
+    return los, weights, noise
+
+
+def _run(spline, values, knots, valid, los, weights, noise, *, min_beams, max_steps, solver,
+         batch_size, fname, unit):
+    los, weights, noise = _los_inputs(los, weights, noise, values.dtype, fname, unit)
+    dtype, shape = los.dtype, los.shape
     if int(min_beams) < 2:
         raise ValueError(
             f"{fname}: `min_beams` must be at least 2 (two unknowns), got {min_beams}."
@@ -808,26 +817,8 @@ def _joint_run(table, spline, per_profile, los, weights, noise, *, profile, min_
     if not isinstance(profile, AbstractProfile):
         raise ValueError(f"{fname}: `profile` must be a lidarjax.AbstractProfile "
                          "(PowerLawProfile(reference_height), UniformProfile()) or None.")
-    los = jnp.asarray(los)
-    dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else table.dtype
-    los = los.astype(dtype)
-    shape = los.shape
-    if weights is None:
-        weights = jnp.ones(shape, dtype)
-    else:
-        weights = _broadcast_input("weights", weights, shape, dtype, "los shape")
-        if is_concrete(weights):
-            wn = np.asarray(weights)
-            if np.any(wn < 0) or np.any(np.isinf(wn)):
-                raise ValueError(f"{fname}: `weights` must be finite and nonnegative (relative "
-                                 "inverse variances; NaN or 0 drops a beam).")
-        weights = jnp.where(jnp.isnan(weights), 0.0, weights)
-    if noise is None:
-        noise = jnp.full(shape[:-1], jnp.nan, dtype)
-    else:
-        noise = _broadcast_input("noise", noise, shape[:-1], dtype, "(..., h)")
-        if is_concrete(noise) and np.any(~(np.asarray(noise) > 0)):
-            raise ValueError(f"{fname}: `noise` must be positive (m/s), or None to estimate it.")
+    los, weights, noise = _los_inputs(los, weights, noise, table.dtype, fname, "los")
+    dtype, shape = los.dtype, los.shape
     if int(min_beams) < 3:
         raise ValueError(f"{fname}: `min_beams` must be at least 3 (three unknowns), got "
                          f"{min_beams}.")
