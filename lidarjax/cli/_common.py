@@ -236,12 +236,16 @@ def check_output_folder(path, *, files=(), inputs=(), option: str = "--out") -> 
     return out
 
 
-def add_run_arguments(parser, *, default_scan: str) -> None:
-    """CFD runs, scan, free stream and probe: shared by `simulate` and `table`."""
+def add_run_arguments(parser, *, default_scan: str, scan_type=None, scan_help=None) -> None:
+    """CFD runs, scan, free stream and probe: shared by `simulate` and `table` (`scan_type`:
+    an argparse type for ``--scan`` instead of the profilers' choices)."""
     parser.add_argument("--field", required=True,
                         help="CFD field file (.npz, .nc or Fluent ASCII); '{beta}' is replaced "
                              "by each platform rotation, e.g. 'runs/platform_{beta}.npz'")
-    parser.add_argument("--scan", choices=SCAN_CHOICES, default=default_scan)
+    if scan_type is None:
+        parser.add_argument("--scan", choices=SCAN_CHOICES, default=default_scan)
+    else:
+        parser.add_argument("--scan", type=scan_type, default=default_scan, help=scan_help)
     parser.add_argument("--cone-angle", type=positive_float, default=None,
                         help="cone angle in degrees (default: the scan's, 30 / 28 / 30)")
     parser.add_argument("--u-ref", type=vector, default=(-15.0, 0.0, 0.0),

@@ -2,6 +2,13 @@
 
 The runs are `lidarjax.simulate_settings`, the files `lidarjax.write_seed_results` and the
 NaN warning `lidarjax.explain_nans` (`lidarjax.workflows.seed_results`).
+
+With a scanning ``--scan`` (a preset ``ppi``, ``rhi``, ``stare``, ``vad``, ``rosette`` or a
+Halo ``.hpl`` / Windcube ``.nc`` scan file's layout) the lidar of the settings file (its
+location per beta, gamma, psi, epsilon, with ``--pitch`` / ``--roll``) flies that scan in each
+run instead (`lidarjax.scanning.simulate_scan`), each run read only over the box the scan's
+sub-rays and probe cover (`lidarjax.cli._scanning.scan_region`); per beta it writes
+``scan_<beta>.nc`` (CF NetCDF, time x beam x range) and with ``--plot`` ``scan_<beta>.png``.
 """
 
 from __future__ import annotations
@@ -11,10 +18,12 @@ import sys
 
 import jax.numpy as jnp
 
+from .._util import format_number
 from ..forward import probe_for_field
-from ..io import read_settings, simulate_points
+from ..io import read_settings, simulate_points, write_scan_netcdf
 from ..io.fields import check_field_file, load_field
 from ..probe import PulsedProbe
+from ..scanning import simulate_scan
 from ..workflows.seed_results import explain_nans, seed_result_files, write_seed_results
 from ..workflows.seed_tables import settings_mount, simulate_settings, table_region
 from ._common import (
@@ -27,6 +36,18 @@ from ._common import (
     make_scan,
     selected_betas,
 )
+from ._scanning import (
+    add_scan_pattern_arguments,
+    check_scan_options,
+    describe,
+    plot_scan,
+    read_scan_source,
+    scan_choice,
+    scan_region,
+    scanning_probe,
+)
+
+_SEED_U_REF = (-15.0, 0.0, 0.0)
 
 
 def register(sub) -> None:
@@ -35,26 +56,48 @@ def register(sub) -> None:
         description="Simulate the lidar of a seed settings.dat in CFD runs (one per platform "
                     "rotation beta) and write the seed's 'windcube simulation <beta> "
                     "degrees.dat' files plus self-describing CSV tables.",
-        epilog="example: lidarjax simulate settings.dat --field 'runs/platform_{beta}.npz' "
-               "--all --scan windcube_v1 --out results/",
+        epilog="examples:\n"
+               "  lidarjax simulate settings.dat --field 'runs/platform_{beta}.npz' --all "
+               "--scan windcube_v1 --out results/\n"
+               "  lidarjax simulate settings.dat --field 'runs/platform_{beta}.npz' --all "
+               "--scan ppi --elevation 2 --n-rays 72 --gates 60 --probe pulsed --plot "
+               "--out ppi/\n"
+               "  lidarjax simulate settings.dat --field run.npz --scan VAD_194.hpl --out vad/\n\n"
+               "A scanning --scan (a preset or a .hpl / .nc scan file) writes per beta "
+               "scan_<beta>.nc (CF NetCDF, time x beam x range: LOS, ray times, azimuth, "
+               "elevation, flags) and, with --plot, scan_<beta>.png (a PPI on its cone seen "
+               "from above, an RHI on its vertical plane) instead of the seed files; --probe "
+               "pulsed is then the instrument's pulse per gate (--instrument, --gate-length).",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     sim.add_argument("settings", help="the seed's settings.dat")
     which = sim.add_mutually_exclusive_group()
     which.add_argument("--beta", type=finite_float, help="platform rotation to run (default: the "
                                                  "settings file's beta)")
     which.add_argument("--all", action="store_true", help="run every beta row, one batch")
-    add_run_arguments(sim, default_scan="windcube_v1")
+    add_run_arguments(sim, default_scan="windcube_v1", scan_type=scan_choice,
+                      scan_help="a profiler (windcube_v1 default, windcube_v2, zephir), a "
+                                "scanning preset (ppi, rhi, stare, vad, rosette) or a Halo "
+                                ".hpl / Windcube .nc scan file (its rays, gates and times)")
     add_tilt_arguments(sim)
     sim.add_argument("--out", default=".", help="output folder (default: .)")
+    sim.add_argument("--plot", action="store_true",
+                     help="scanning scans: a PNG per beta of the scan on its cone or plane")
+    add_scan_pattern_arguments(sim, title="scanning scans (a preset or a scan file)")
     sim.set_defaults(func=run)
 
 
 def run(args) -> int:
+    scanning = check_scan_options(args, profiler_only=(
+        ("--cone-angle", args.cone_angle is not None),
+        ("--tilt-compensation", args.tilt_compensation),
+        ("--u-ref (normalises the seed files)", tuple(args.u_ref) != _SEED_U_REF)))
     settings = read_settings(args.settings)
     betas = selected_betas(args, settings)
     for b in betas:
         settings.location(b)  # raises a ValueError naming the missing row
     paths = field_paths(args, betas)
+    if scanning:
+        return run_scanning(args, settings, betas, paths)
     scan = make_scan(args.scan, args.cone_angle, tilt_compensation=args.tilt_compensation)
     probe = make_probe(args)
     inputs = [("settings", args.settings)] + [(f"--field (beta {b:g})", p)
@@ -98,4 +141,40 @@ def run(args) -> int:
     why = explain_nans(sims, fields, settings, paths)
     if why:
         print(f"lidarjax simulate: warning: {why}", file=sys.stderr)
+    return 0
+
+
+def run_scanning(args, settings, betas, paths) -> int:
+    """A scanning scan per beta: the settings' mount (with --pitch, --roll), each CFD run read
+    over the scan's region, one CF NetCDF (and with --plot one PNG) per beta."""
+    pattern, gate = read_scan_source(args)
+    probe = scanning_probe(args, gate)
+    names = {b: f"scan_{format_number(b)}" for b in betas}
+    files = [f"{n}.nc" for n in names.values()] + ([f"{n}.png" for n in names.values()]
+                                                   if args.plot else [])
+    inputs = ([("settings", args.settings), ("--scan", args.scan)]
+              + [(f"--field (beta {b:g})", p) for b, p in paths.items()])
+    out = check_output_folder(args.out, files=files, inputs=inputs)
+    for path in paths.values():  # every file's format checked before computing
+        check_field_file(path)
+    mounts = settings_mount(settings, betas, pitch=args.pitch, roll=args.roll)
+    out.mkdir(parents=True, exist_ok=True)
+    for k, b in enumerate(betas):
+        mount = mounts[k]
+        field = load_field(paths[b], region=scan_region(pattern, mount, probe))
+        res = simulate_scan(field, pattern, mount, probe=probe)
+        nc = out / f"{names[b]}.nc"
+        write_scan_netcdf(nc, res.los, azimuth=res.azimuth, elevation=res.elevation,
+                          ranges=res.ranges, ray_time=res.times, flags=res.flags,
+                          title=f"lidarjax simulate {args.scan}",
+                          attrs={"settings": str(args.settings), "field": str(paths[b]),
+                                 "scan": str(args.scan), "beta_deg": float(b),
+                                 "pitch_deg": float(args.pitch), "roll_deg": float(args.roll),
+                                 "probe": type(probe).__name__})
+        wrote = [str(nc)]
+        if args.plot:
+            png = out / f"{names[b]}.png"
+            plot_scan(res, pattern.kind, png)
+            wrote.append(str(png))
+        print(f"beta {b:g}: {describe(res, pattern.kind)}; wrote {', '.join(wrote)}")
     return 0
