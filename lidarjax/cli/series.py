@@ -4,27 +4,38 @@ mean flow -> a simulated ``.sta``, the statistics as CSV and lidar against point
 The field is `lidarjax.series_field` (`lidarjax.workflows.series_run`), the statistics
 `lidarjax.simulate_statistics` and the files `lidarjax.write_series_report`; this module
 parses, checks the options and prints.
+
+A scanning ``--scan`` (a preset ``ppi``, ``rhi``, ``stare``, ``vad``, ``rosette`` or the layout
+of a Halo ``.hpl`` / Windcube ``.nc`` scan file) is flown through the same field in time
+instead (`lidarjax.scanning.simulate_scan_series`, ``--scans N`` repetitions or as many as
+cover ``--hours``, in compiled batches): the files are ``series_scan.nc`` (CF NetCDF, time x
+beam x range), ``series_scan.png`` (the last scan on its cone or plane) and, for a PPI or
+VAD, ``series_vad.csv`` (the VAD wind profile of every scan, `lidarjax.scanning.vad_fit`).
+The 10-minute ``.sta`` statistics are the profilers' and are not written for a scanning scan.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 import numpy as np
 
 from .. import scan as scans
-from ..io import read_motion_csv, read_settings
+from ..io import read_motion_csv, read_settings, write_scan_netcdf, write_table_csv
 from ..io.fields import load_field
 from ..mount import Mount
+from ..probe import PointProbe
+from ..scanning import ScanResult, simulate_scan_series, vad_fit
 from ..scenes import uniform
 from ..series import RECORD_LENGTH, probe_for_field, simulate_statistics
 from ..timing import schedule_for
 from ..workflows.series_report import write_series_report
 from ..workflows.series_run import mean_wind_above, series_field
 from ._common import (
-    SCAN_CHOICES,
     add_probe_arguments,
+    check_output_folder,
     finite_float,
     make_probe,
     make_scan,
@@ -32,6 +43,18 @@ from ._common import (
     positive_int,
     vector,
 )
+from ._scanning import (
+    add_scan_pattern_arguments,
+    check_scan_options,
+    describe,
+    plot_scan,
+    read_scan_source,
+    scan_choice,
+    scanning_probe,
+)
+
+#: Gate samples (rays x gates x sub-rays x probe nodes) per compiled batch of a scanning scan.
+SCAN_BATCH_SAMPLES = 20_000_000
 
 
 def _ints(text: str) -> tuple[int, int, int]:
@@ -59,7 +82,17 @@ def register(sub) -> None:
                "  lidarjax series settings.dat --field run.npz --box turb.bts --scan zephir "
                "--hours 6 --out series/\n"
                "  lidarjax series settings.dat --field run.npz --box u.bin,v.bin,w.bin "
-               "--box-shape 8192,32,32 --box-spacing 2,4,4 --out series/",
+               "--box-shape 8192,32,32 --box-spacing 2,4,4 --out series/\n"
+               "  lidarjax series settings.dat --field uniform --speed 8 --direction 270 "
+               "--generate-box 512,32,32 --scan vad --elevation 60 --gates 40 --scans 20 "
+               "--out vad/\n\n"
+               "A scanning --scan (a preset or a .hpl / .nc scan file) is flown through the "
+               "same field in time instead: --scans N repetitions (default: as many as cover "
+               "--hours). It writes series_scan.nc (CF NetCDF, time x beam x range: LOS, ray "
+               "times, azimuth, elevation, flags), series_scan.png (the last scan on its cone or "
+               "plane; not with --no-plots) and, for a PPI or VAD, series_vad.csv (each scan's "
+               "VAD wind profile per gate). The 10-minute .sta statistics are the profilers' and "
+               "are not written for a scanning scan.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("settings", help="the seed's settings.dat (location, angles, heights)")
     p.add_argument("--beta", type=finite_float, default=None,
@@ -89,7 +122,10 @@ def register(sub) -> None:
     p.add_argument("--direction", type=finite_float, default=None,
                    help="advection direction, degrees from CFD +y, meteorological (default: "
                         "the mean flow's there)")
-    p.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v2")
+    p.add_argument("--scan", type=scan_choice, default="windcube_v2",
+                   help="a profiler (windcube_v1, windcube_v2 default, zephir), a scanning "
+                        "preset (ppi, rhi, stare, vad, rosette) or a Halo .hpl / Windcube .nc "
+                        "scan file (its rays, gates and times)")
     p.add_argument("--cone-angle", type=positive_float, default=None,
                    help="cone angle in degrees (default: the scan's)")
     p.add_argument("--seconds-per-los", type=positive_float, default=None,
@@ -105,13 +141,26 @@ def register(sub) -> None:
                    help="date and time of the first record's start (default 2024-01-01T00:00)")
     p.add_argument("--hours", type=positive_float, default=24.0,
                    help="hours simulated, whole 10-minute records (default 24)")
-    p.add_argument("--chunk", type=positive_int, default=36, help="records per compiled batch")
+    p.add_argument("--chunk", type=positive_int, default=None,
+                   help="records per compiled batch (default 36); scanning scans: scans per "
+                        "batch (default: chosen for the scan's size)")
     p.add_argument("--no-plots", action="store_true", help="skip the figure")
     p.add_argument("--out", default=".", help="output folder (default: .)")
+    add_scan_pattern_arguments(p, title="scanning scans (a preset or a scan file)")
+    p.add_argument("--scans", type=positive_int, default=None,
+                   help="scanning scans: repetitions flown (default: as many as cover --hours)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    scanning = check_scan_options(args, profiler_only=(
+        ("--cone-angle", args.cone_angle is not None),
+        ("--seconds-per-los (a scan's timing is its --accumulation)",
+         args.seconds_per_los is not None),
+        ("--tilt-compensation", args.tilt_compensation)))
+    if not scanning and args.scans is not None:
+        raise ValueError(f"--scans applies to scanning scans, not to the profiler {args.scan} "
+                         "(its length is --hours); drop it or give e.g. --scan ppi")
     settings = read_settings(args.settings)
     beta = float(settings.beta if args.beta is None else args.beta)
     location = settings.location(beta)
@@ -120,6 +169,8 @@ def run(args) -> int:
         start = np.datetime64(args.start, "s")
     except ValueError:
         raise ValueError(f"--start {args.start!r} is not a date and time (e.g. 2024-01-01T00:00)") from None
+    if scanning:
+        return run_scanning(args, settings, beta, location, heights, start)
     n_rec = int(np.floor(args.hours * 3600.0 / RECORD_LENGTH + 1e-9))
     if n_rec < 1:
         raise ValueError(f"--hours {args.hours} holds no whole 10-minute record")
@@ -149,7 +200,7 @@ def run(args) -> int:
     print(f"lidarjax series: {args.scan} ({label}), {heights.size} heights, {n_rec} records; "
           f"{info}")
     stats = simulate_statistics(field, scan, mount, heights, starts, schedule=schedule,
-                                probe=probe, motion=motion, chunk=args.chunk,
+                                probe=probe, motion=motion, chunk=args.chunk or 36,
                                 refine_probe=False)
     meta = {"settings": str(args.settings), "field": args.field, "scan": args.scan,
             "beta_deg": beta, "box": info, "start": str(start)}
@@ -203,3 +254,91 @@ def build_field(args, settings, beta, location, heights):
                         box_shape=args.box_shape, box_spacing=args.box_spacing,
                         generate_box=args.generate_box, length_scale=args.length_scale,
                         gamma=args.gamma, ti=args.ti, seed=args.seed, generator=args.generator)
+
+
+def run_scanning(args, settings, beta, location, heights, start) -> int:
+    """A scanning scan flown through the frozen-turbulence field (module docs)."""
+    if args.ti <= 0:
+        raise ValueError(f"--ti must be positive, got {args.ti}")
+    pattern, gate = read_scan_source(args)
+    if args.probe == "auto":
+        args.probe = "pulsed"
+    probe = scanning_probe(args, gate)
+    period = float(pattern.period)
+    n_scans = args.scans or max(1, math.ceil(args.hours * 3600.0 / period - 1e-9))
+    vad = pattern.kind in ("ppi", "vad")
+    files = ["series_scan.nc"] + ([] if args.no_plots else ["series_scan.png"]) + (
+        ["series_vad.csv"] if vad else [])
+    inputs = [("settings", args.settings), ("--field", None if args.field == "uniform"
+                                                       else args.field),
+              ("--scan", args.scan), ("--motion", args.motion)]
+    inputs += [("--box", b) for b in (args.box.split(",") if args.box else ())]
+    out = check_output_folder(args.out, files=files, inputs=inputs)
+    field, info = build_field(args, settings, beta, location, heights)
+    mount = Mount(location, beta=beta, gamma=settings.gamma, psi=settings.psi,
+                  epsilon=settings.epsilon)
+    motion = read_motion_csv(args.motion) if args.motion else None
+    # probe nodes per gate, to size the batches only (16: typical of a count chosen for a box)
+    nodes = 1 if isinstance(probe, PointProbe) else (args.probe_nodes or 16)
+    per = args.chunk or max(1, SCAN_BATCH_SAMPLES
+                            // (pattern.n_rays * pattern.n_sub * pattern.n_gates * nodes))
+    per = min(per, n_scans)
+    print(f"lidarjax series: {args.scan} ({pattern.kind}, {type(probe).__name__}), "
+          f"{n_scans} scans of {period:g} s in batches of {per}; {info}")
+    parts = []
+    for first in range(0, n_scans, per):  # every batch `per` scans: one compilation
+        res = simulate_scan_series(field, pattern, mount, n_scans=per, start=first * period,
+                                   probe=probe, motion=motion)
+        parts.append((np.asarray(res.los), np.asarray(res.times), np.asarray(res.flags)))
+    los, times, flags = (np.concatenate(a)[:n_scans] for a in zip(*parts, strict=True))
+    res = ScanResult(los=los, times=times, ranges=res.ranges, azimuth=res.azimuth,
+                     elevation=res.elevation, directions=res.directions, points=res.points,
+                     flags=flags)
+    meta = {"settings": str(args.settings), "field": args.field, "scan": str(args.scan),
+            "beta_deg": beta, "box": info, "start": str(start),
+            "probe": type(probe).__name__}
+    out.mkdir(parents=True, exist_ok=True)
+    wrote = [write_scan_netcdf(out / "series_scan.nc", los, azimuth=res.azimuth,
+                               elevation=res.elevation, ranges=res.ranges, ray_time=times,
+                               flags=flags, title=f"lidarjax series {args.scan}", attrs=meta)]
+    if vad:
+        wrote.append(write_vad_csv(out / "series_vad.csv", res, meta))
+    if not args.no_plots:
+        plot_scan(res, pattern.kind, out / "series_scan.png")
+        wrote.append(out / "series_scan.png")
+    print(f"{describe(res, pattern.kind)}")
+    print("wrote " + ", ".join(str(w) for w in wrote))
+    return 0
+
+
+def write_vad_csv(path, res, metadata):
+    """The VAD wind profile of every scan of `res` (`lidarjax.scanning.vad_fit`, per gate) as
+    a self-describing CSV (`lidarjax.io.write_table_csv`): one row per (scan, gate), the wind
+    in the instrument's frame (``u`` towards its azimuth 90, ``v`` towards its azimuth 0,
+    ``w`` up) and its meteorological direction there (where it comes from, clockwise from
+    the instrument's azimuth 0)."""
+    los = np.asarray(res.los)
+    prof = vad_fit(los, res.azimuth, res.elevation, res.ranges)
+    n, _, g = los.shape
+    vel = np.asarray(prof.velocity).reshape(n * g, 3)
+    u, v = vel[:, 0], vel[:, 1]
+    times = np.asarray(res.times)
+    cols = {
+        "scan": np.repeat(np.arange(n), g),
+        "time": np.repeat(times.mean(axis=1), g),
+        "range": np.tile(np.asarray(res.ranges), n),
+        "height": np.tile(np.asarray(prof.heights), n),
+        "u": u, "v": v, "w": vel[:, 2],
+        "speed": np.hypot(u, v),
+        "direction": np.mod(np.rad2deg(np.arctan2(-u, -v)), 360.0),
+        "residual": np.asarray(prof.residual).ravel(),
+        "n_rays": np.asarray(prof.n_rays).ravel(),
+        "condition": np.asarray(prof.condition).ravel(),
+        "flags": np.asarray(prof.flags).ravel(),
+    }
+    units = {"scan": "-", "time": "s since the start, mean of the scan's rays", "range": "m",
+             "height": "m above the lidar", "u": "m/s", "v": "m/s", "w": "m/s",
+             "speed": "m/s, horizontal", "direction": "deg, from, instrument frame",
+             "residual": "m/s, rms", "n_rays": "-", "condition": "-",
+             "flags": "lidarjax.InverseFlag bits"}
+    return write_table_csv(path, cols, units, {**metadata, "profile": "lidarjax.scanning.vad_fit"})
