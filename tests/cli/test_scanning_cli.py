@@ -1,0 +1,227 @@
+"""`lidarjax simulate` and `lidarjax series` with a scanning `--scan` (a preset or the real Halo
+file's layout): the CF NetCDF against the closed form ``u . n`` in a uniform wind (from the
+file's own azimuth and elevation, per platform rotation), the series against
+`simulate_scan_series` called directly, the VAD profile against the wind, the PNG, the region
+read from each run, and the one-line refusals."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import lidarjax as lj
+from lidarjax.cli import main
+from lidarjax.cli._scanning import scan_region
+from lidarjax.io import Settings, read_scan_netcdf, read_table_csv, save_field_npz, write_settings
+
+from ..helpers import DATA
+
+pytest.importorskip("xarray")
+
+HPL = DATA / "scanning" / "VAD_194_20210624_170110_cut.hpl"
+WIND = np.array([3.0, -4.0, 0.5])  # uniform CFD wind, m/s
+LOCATIONS = {0.0: [0.0, 0.0, 0.0], 30.0: [100.0, 50.0, 10.0]}
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _settings(path, betas):
+    write_settings(path, Settings(zone=2, verbose=1, height=100.0, nh=2, gamma=0.0, beta=0.0,
+                                  psi=0.0, epsilon=0.0, betas=np.array(betas),
+                                  locations=np.array([LOCATIONS[b] for b in betas])))
+    return path
+
+
+def _unit(back):
+    """Body-frame rays ``(cos e sin a, cos e cos a, sin e)`` from the file's angles."""
+    a, e = np.deg2rad(back["azimuth"]), np.deg2rad(back["elevation"])
+    return np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=-1)
+
+
+def _closed_form(back, beta):
+    """``u . n`` per (beam, gate) from the file's azimuth and elevation: the body-frame ray
+    turned by the platform rotation `beta` (degrees, anticlockwise) about z."""
+    n = _unit(back)
+    c, s = math.cos(math.radians(beta)), math.sin(math.radians(beta))
+    n = n @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
+    return np.broadcast_to((n @ WIND)[:, None], back["radial_velocity"].shape[1:])
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory):
+    root = tmp_path_factory.mktemp("scanning_cli")
+    settings = _settings(root / "settings.dat", [0.0, 30.0])
+    x = y = np.linspace(-1500.0, 1500.0, 11)
+    z = np.linspace(0.0, 1500.0, 6)
+    vel = np.broadcast_to(WIND, (x.size, y.size, z.size, 3)).copy()
+    for b in LOCATIONS:
+        save_field_npz(root / f"run_{int(b)}.npz", (x, y, z, vel))
+    return root, settings
+
+
+@pytest.fixture(scope="module")
+def ppi_run(case):
+    root, settings = case
+    out = root / "ppi"
+    argv = ["simulate", str(settings), "--field", str(root / "run_{beta}.npz"), "--all",
+            "--scan", "ppi", "--elevation", "5", "--n-rays", "12", "--gates", "8",
+            "--probe", "pulsed", "--plot", "--out", str(out)]
+    assert main(argv) == 0
+    return out
+
+
+def test_simulate_ppi_is_u_dot_n_per_beta_with_plots(ppi_run, capsys):
+    for beta in (0.0, 30.0):
+        back = read_scan_netcdf(ppi_run / f"scan_{int(beta)}.nc")
+        assert back["radial_velocity"].shape == (1, 12, 8)
+        np.testing.assert_allclose(back["elevation"], 5.0)
+        np.testing.assert_allclose(back["range"], lj.scanning.gate_ranges(8, 30.0))
+        np.testing.assert_allclose(back["radial_velocity"][0], _closed_form(back, beta),
+                                   rtol=0, atol=1e-9)
+        assert float(back["attrs"]["beta_deg"]) == beta
+        assert (ppi_run / f"scan_{int(beta)}.png").read_bytes()[:8] == PNG
+
+
+def test_simulate_hpl_layout_and_tilted_mount(case, tmp_path, capsys):
+    root, settings = case
+    out = tmp_path / "vad"
+    assert main(["simulate", str(settings), "--field", str(root / "run_0.npz"), "--beta", "0",
+                 "--scan", str(HPL), "--probe", "pulsed", "--out", str(out)]) == 0
+    line = capsys.readouterr().out
+    assert "2 rays x 40 gates (vad)" in line and "0.0% NaN" in line
+    back = read_scan_netcdf(out / "scan_0.nc")
+    halo = lj.io.read_hpl(HPL)
+    pattern = halo.pattern()
+    assert back["radial_velocity"].shape == (1, halo.n_rays, halo.n_gates)
+    np.testing.assert_allclose(back["range"], halo.ranges)
+    np.testing.assert_allclose(back["azimuth"], np.asarray(pattern.azimuth))
+    np.testing.assert_allclose(back["elevation"], np.asarray(pattern.elevation))
+    np.testing.assert_allclose(back["ray_time"][0], np.asarray(pattern.ray_times()))
+    np.testing.assert_allclose(back["radial_velocity"][0], _closed_form(back, 0.0), atol=1e-9)
+    # a tilted installation: the settings' mount with --pitch and --roll (rays leave the
+    # mount's frame, so the LOS is no longer the file's u . n)
+    argv = ["simulate", str(settings), "--field", str(root / "run_{beta}.npz"), "--beta", "30",
+            "--scan", "rhi", "--azimuth", "40", "--n-rays", "5", "--gates", "4",
+            "--pitch", "6", "--roll", "-4", "--out", str(out)]
+    assert main(argv) == 0
+    got = read_scan_netcdf(out / "scan_30.nc")["radial_velocity"][0]
+    mount = lj.Mount(LOCATIONS[30.0], beta=30.0, pitch=6.0, roll=-4.0)
+    pattern = lj.scanning.rhi(40.0, lj.scanning.gate_ranges(4, 30.0), n_rays=5)
+    n = np.asarray(lj.scanning.simulate_scan(lj.scenes.uniform(5.0, 0.0), pattern,
+                                             mount).directions)
+    np.testing.assert_allclose(got, np.broadcast_to((n @ WIND)[:, None], got.shape), atol=1e-9)
+    assert not np.allclose(got, _closed_form(read_scan_netcdf(out / "scan_30.nc"), 30.0))
+
+
+def test_scan_region_bounds_the_gates_of_every_mount():
+    pattern = lj.scanning.ppi(10.0, lj.scanning.gate_ranges(6, 30.0), n_rays=9)
+    mounts = [lj.Mount(LOCATIONS[b], beta=b, pitch=3.0) for b in LOCATIONS]
+    lo, hi = scan_region(pattern, mounts)  # point probe: exactly the gate centres' box
+    pts = np.concatenate([np.asarray(lj.scanning.simulate_scan(
+        lj.scenes.uniform(5.0, 0.0), pattern, m).points).reshape(-1, 3) for m in mounts])
+    np.testing.assert_allclose(lo, pts.min(axis=0), atol=1e-9)
+    np.testing.assert_allclose(hi, pts.max(axis=0), atol=1e-9)
+    probe = lj.scanning.instrument_probe()  # pulsed: grows by its support along the beams
+    lo_p, hi_p = scan_region(pattern, mounts, probe)
+    assert np.all(lo_p < lo) and np.all(hi_p > hi)
+
+
+@pytest.fixture(scope="module")
+def series_case(tmp_path_factory):
+    root = tmp_path_factory.mktemp("scanning_series")
+    return root, _settings(root / "settings.dat", [0.0])
+
+
+SERIES = ["--field", "uniform", "--speed", "8", "--direction", "270", "--generate-box",
+          "32,8,8", "--box-spacing", "8,8,8", "--probe", "point"]
+
+
+def test_series_matches_simulate_scan_series(series_case, capsys):
+    root, settings = series_case
+    out = root / "vad"
+    # batches of 2 scans for 3: the second batch starts at 2 periods and is cut to one scan
+    argv = ["series", str(settings), *SERIES, "--scan", "vad", "--elevation", "60",
+            "--n-rays", "6", "--gates", "5", "--scans", "3", "--chunk", "2", "--out", str(out)]
+    assert main(argv) == 0
+    back = read_scan_netcdf(out / "series_scan.nc")
+    field, _ = lj.series_field(lj.scenes.uniform(8.0, 270.0), LOCATIONS[0.0], speed=8.0,
+                               direction=270.0, generate_box=(32, 8, 8), box_spacing=(8, 8, 8))
+    pattern = lj.scanning.vad(60.0, lj.scanning.gate_ranges(5, 30.0), n_rays=6)
+    ref = lj.scanning.simulate_scan_series(field, pattern, lj.Mount(LOCATIONS[0.0]), n_scans=3)
+    assert back["radial_velocity"].shape == (3, 6, 5)
+    np.testing.assert_allclose(back["radial_velocity"], np.asarray(ref.los), rtol=0, atol=1e-10)
+    np.testing.assert_allclose(back["ray_time"], np.asarray(ref.times), rtol=0, atol=1e-12)
+    period = float(pattern.period)
+    np.testing.assert_allclose(back["ray_time"][:, 0] - back["ray_time"][0, 0],
+                               [0.0, period, 2 * period])
+    assert np.std(back["radial_velocity"]) > 0.1  # the turbulence is there
+    table = read_table_csv(out / "series_vad.csv").columns
+    prof = lj.scanning.vad_fit(back["radial_velocity"], back["azimuth"], back["elevation"],
+                               back["range"])
+    np.testing.assert_allclose(table["u"], np.asarray(prof.velocity)[..., 0].ravel())
+    assert (out / "series_scan.png").read_bytes()[:8] == PNG
+    assert "6 rays x 5 gates x 3 scans (vad)" in capsys.readouterr().out
+
+
+def test_series_hours_and_vad_profile_of_a_calm_box(series_case, capsys):
+    root, settings = series_case
+    out = root / "ppi"
+    argv = ["series", str(settings), *SERIES, "--ti", "1e-9", "--scan", "ppi", "--elevation",
+            "30", "--n-rays", "8", "--accumulation", "0.5", "--gates", "3", "--hours", "0.005",
+            "--no-plots", "--out", str(out)]
+    assert main(argv) == 0
+    back = read_scan_netcdf(out / "series_scan.nc")
+    period = 8 * 0.5
+    n = math.ceil(0.005 * 3600 / period)  # scans that cover --hours
+    assert back["radial_velocity"].shape == (n, 8, 3)
+    np.testing.assert_allclose(np.diff(back["ray_time"][:, 0]), period)
+    wind = np.array([8.0, 0.0, 0.0])  # from 270: towards +x
+    los = np.broadcast_to((_unit(back) @ wind)[:, None], back["radial_velocity"].shape)
+    np.testing.assert_allclose(back["radial_velocity"], los, atol=1e-6)
+    table = read_table_csv(out / "series_vad.csv").columns
+    np.testing.assert_allclose(table["speed"], 8.0, atol=1e-6)
+    np.testing.assert_allclose(table["direction"], 270.0, atol=1e-5)
+    np.testing.assert_allclose(table["height"], np.tile(back["range"] * 0.5, n))
+    assert not (out / "series_scan.png").exists()
+    assert not (out / "series.sta").exists()
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("command, extra, text", [
+    ("simulate", ["--scan", "ppi", "--cone-angle", "20"], "--cone-angle applies to the profilers"),
+    ("simulate", ["--scan", "rhi", "--tilt-compensation"], "--tilt-compensation applies to"),
+    ("simulate", ["--scan", "windcube_v2", "--elevation", "3"], "--elevation applies to scanning"),
+    ("simulate", ["--scan", "zephir", "--plot"], "--plot draws a scanning scan"),
+    ("simulate", ["--scan", "scan.txt"], "suffix '.txt' is no scan"),
+    ("simulate", ["--scan", "spiral"], "'spiral' is no scan"),
+    ("simulate", ["--scan", str(HPL), "--gates", "3"], "has its own"),
+    ("simulate", ["--scan", "missing.hpl"], "not found"),
+    ("simulate", ["--scan", "ppi", "--probe", "pulsed", "--probe-scale", "10"], "--gate-length"),
+    ("series", ["--scan", "ppi", "--seconds-per-los", "1"], "--seconds-per-los"),
+    ("series", ["--scan", "vad", "--cone-angle", "30"], "--cone-angle applies to the profilers"),
+    ("series", ["--scan", "windcube_v2", "--scans", "3"], "--scans applies to scanning"),
+    ("series", ["--scan", "windcube_v2", "--gate-length", "30"], "--gate-length applies to"),
+])
+def test_bad_inputs_are_one_line(case, tmp_path, capsys, command, extra, text):
+    root, settings = case
+    if command == "simulate":
+        argv = ["simulate", str(settings), "--field", str(root / "run_0.npz")]
+    else:
+        argv = ["series", str(settings), *SERIES]
+    rc = main(argv + extra + ["--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and text in err and "\n" not in err and "Traceback" not in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_input_is_never_overwritten(case, tmp_path, capsys):
+    root, settings = case
+    field = tmp_path / "scan_0.nc"  # a CFD run named like the output of beta 0
+    lj.io.save_field_netcdf(field, lj.io.load_field(root / "run_0.npz"))
+    before = field.read_bytes()
+    rc = main(["simulate", str(settings), "--field", str(field), "--scan", "stare",
+               "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "inputs are never overwritten" in err and "\n" not in err
+    assert field.read_bytes() == before
