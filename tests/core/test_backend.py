@@ -49,8 +49,15 @@ def test_buckets_are_few_and_waste_at_most_a_third():
     assert set(f.tolist()) <= set(b.tolist())
 
 
-def test_cpu_keeps_its_tuned_sizes():
-    assert jax.default_backend() == "cpu" and not is_accelerator()
+@pytest.fixture
+def on_cpu(monkeypatch):
+    """The CPU's sizes, whatever backend runs the suite (a GPU run checks them too)."""
+    cpu = jax.devices("cpu")
+    monkeypatch.setattr(jax, "local_devices", lambda: cpu)
+
+
+def test_cpu_keeps_its_tuned_sizes(on_cpu):
+    assert not is_accelerator()
     assert DEFAULT_BATCH_SIZE == CPU_BATCH["invert"] == 512
     assert default_batch("invert", 7_000, 10**6) == 512
     assert default_batch("invert", 7_000, 10) == 512  # the caller pads or trims
@@ -90,8 +97,19 @@ def test_accelerator_with_room_takes_the_whole_problem():
         _backend.FALLBACK_BUDGET // 1_000)
 
 
-def test_invert_chooses_its_batches_from_the_device(monkeypatch):
-    """`invert`'s default batch: 512 problems on this CPU; on a (fake) GPU with room, every
+def test_a_real_accelerator_takes_the_whole_problem():
+    """On the backend running the suite: the CPU's tuned batch, or on a GPU with room every
+    record in one batch."""
+    n, h, b, dirs = 10_000, 4, 5, 24
+    per_batch, n_pad = _batching(None, n, h, b, dirs, 8, "invert")
+    if is_accelerator():
+        assert jax.default_backend() != "cpu" and (per_batch, n_pad) == (None, bucket(n))
+    else:
+        assert jax.default_backend() == "cpu" and per_batch == 512 // h
+
+
+def test_invert_chooses_its_batches_from_the_device(monkeypatch, on_cpu):
+    """`invert`'s default batch: 512 problems on a CPU; on a (fake) GPU with room, every
     record in one batch, padded to a bucket."""
     n, h, b, dirs = 10_000, 4, 5, 24
     per_batch, n_pad = _batching(None, n, h, b, dirs, 8, "invert")
