@@ -245,6 +245,30 @@ def describe(res, kind: str) -> str:
             f"{rng[-1]:g} m; {span}, {np.isnan(los).mean():.1%} NaN")
 
 
+def explain_scan_nans(res, field) -> str | None:
+    """One line on the NaN LOS of `res` in `field` (None when there are none): how many gate
+    centres lie outside the field's grid (its extent named) and what to change."""
+    los = np.asarray(res.los)
+    if not np.isnan(los).any():
+        return None
+    share = f"{np.isnan(los).mean():.1%} of the LOS are NaN"
+    grid = getattr(field, "grid", field)
+    if not all(hasattr(grid, a) for a in ("x", "y", "z")):
+        return f"{share} (probe nodes outside the field or in a solid)"
+    axes = [np.asarray(getattr(grid, a), np.float64) for a in ("x", "y", "z")]
+    pts = np.asarray(res.points, np.float64)
+    out = np.zeros(pts.shape[:-1], bool)
+    for k, a in enumerate(axes):
+        out |= (pts[..., k] < a.min()) | (pts[..., k] > a.max())
+    extent = ", ".join(f"{n} {a.min():g}..{a.max():g}" for n, a in zip("xyz", axes, strict=True))
+    if out.any():
+        return (f"{share}: {int(out.sum())} of {out.size} gate centres lie outside the CFD "
+                f"field ({extent} m, as read for this scan); fewer --gates, a shorter "
+                "--gate-length or another --elevation keeps the scan inside")
+    return (f"{share}: every gate centre is inside the CFD field ({extent} m); the rest are "
+            "probe nodes outside it or in a solid (try --probe point to see which)")
+
+
 def rhi_plane(directions, elevation, rel) -> np.ndarray:
     """Signed horizontal distance of points `rel` ``(r, g, 3)`` (CFD metres from the lidar)
     along the horizontal axis of an RHI's vertical plane: the dominant horizontal direction

@@ -40,6 +40,7 @@ from ._scanning import (
     add_scan_pattern_arguments,
     check_scan_options,
     describe,
+    explain_scan_nans,
     plot_scan,
     read_scan_source,
     scan_choice,
@@ -177,4 +178,7 @@ def run_scanning(args, settings, betas, paths) -> int:
             plot_scan(res, pattern.kind, png)
             wrote.append(str(png))
         print(f"beta {b:g}: {describe(res, pattern.kind)}; wrote {', '.join(wrote)}")
+        why = explain_scan_nans(res, field)
+        if why:
+            print(f"lidarjax simulate: warning: beta {b:g}: {why}", file=sys.stderr)
     return 0

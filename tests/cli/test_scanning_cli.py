@@ -114,6 +114,19 @@ def test_simulate_hpl_layout_and_tilted_mount(case, tmp_path, capsys):
     assert not np.allclose(got, _closed_form(read_scan_netcdf(out / "scan_30.nc"), 30.0))
 
 
+def test_gates_beyond_the_run_are_nan_and_explained(case, tmp_path, capsys):
+    root, settings = case
+    argv = ["simulate", str(settings), "--field", str(root / "run_0.npz"), "--scan", "stare",
+            "--azimuth", "90", "--elevation", "3", "--gates", "60", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    los = read_scan_netcdf(tmp_path / "scan_0.nc")["radial_velocity"][0, 0]
+    beyond = lj.scanning.gate_ranges(60, 30.0) * math.cos(math.radians(3.0)) > 1500.0
+    assert beyond.sum() == 10
+    np.testing.assert_array_equal(np.isnan(los), beyond)
+    err = capsys.readouterr().err
+    assert "10 of 60 gate centres lie outside the CFD field" in err and err.count("\n") == 1
+
+
 def test_scan_region_bounds_the_gates_of_every_mount():
     pattern = lj.scanning.ppi(10.0, lj.scanning.gate_ranges(6, 30.0), n_rays=9)
     mounts = [lj.Mount(LOCATIONS[b], beta=b, pitch=3.0) for b in LOCATIONS]
