@@ -10,7 +10,7 @@ of a Halo ``.hpl`` / Windcube ``.nc`` scan file) is flown through the same field
 instead (`lidarjax.scanning.simulate_scan_series`, ``--scans N`` repetitions or as many as
 cover ``--hours``, in compiled batches): the files are ``series_scan.nc`` (CF NetCDF, time x
 beam x range), ``series_scan.png`` (the last scan on its cone or plane) and, for a PPI or
-VAD, ``series_vad.csv`` (the VAD wind profile of every scan, `lidarjax.scanning.vad_fit`).
+VAD of at least 3 rays, ``series_vad.csv`` (the VAD wind profile of every scan, `lidarjax.scanning.vad_fit`).
 The 10-minute ``.sta`` statistics are the profilers' and are not written for a scanning scan.
 """
 
@@ -266,7 +266,7 @@ def run_scanning(args, settings, beta, location, heights, start) -> int:
     probe = scanning_probe(args, gate)
     period = float(pattern.period)
     n_scans = args.scans or max(1, math.ceil(args.hours * 3600.0 / period - 1e-9))
-    vad = pattern.kind in ("ppi", "vad")
+    vad = pattern.kind in ("ppi", "vad") and pattern.n_rays >= 3  # a fit needs 3 rays
     files = ["series_scan.nc"] + ([] if args.no_plots else ["series_scan.png"]) + (
         ["series_vad.csv"] if vad else [])
     inputs = [("settings", args.settings), ("--field", None if args.field == "uniform"
@@ -307,6 +307,8 @@ def run_scanning(args, settings, beta, location, heights, start) -> int:
         plot_scan(res, pattern.kind, out / "series_scan.png")
         wrote.append(out / "series_scan.png")
     print(f"{describe(res, pattern.kind)}")
+    if pattern.kind in ("ppi", "vad") and not vad:
+        print(f"no VAD profile: the scan has {pattern.n_rays} rays, a fit needs 3")
     print("wrote " + ", ".join(str(w) for w in wrote))
     return 0
 

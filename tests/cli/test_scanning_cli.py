@@ -33,6 +33,21 @@ def _settings(path, betas):
     return path
 
 
+def test_series_of_the_halo_file_layout(series_case, capsys):
+    root, settings = series_case
+    out = root / "hpl"
+    assert main(["series", str(settings), *SERIES, "--scan", str(HPL), "--scans", "2",
+                 "--no-plots", "--out", str(out)]) == 0
+    back = read_scan_netcdf(out / "series_scan.nc")
+    pattern = lj.io.read_hpl(HPL).pattern()
+    assert back["radial_velocity"].shape == (2, 2, 40)
+    times = np.asarray(pattern.ray_times())[None] + float(pattern.period) * np.arange(2)[:, None]
+    np.testing.assert_allclose(back["ray_time"], times, atol=1e-9)
+    assert np.isfinite(back["radial_velocity"]).all()
+    assert "no VAD profile: the scan has 2 rays" in capsys.readouterr().out
+    assert not (out / "series_vad.csv").exists()
+
+
 def _unit(back):
     """Body-frame rays ``(cos e sin a, cos e cos a, sin e)`` from the file's angles."""
     a, e = np.deg2rad(back["azimuth"]), np.deg2rad(back["elevation"])
