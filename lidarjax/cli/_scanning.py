@@ -247,26 +247,35 @@ def describe(res, kind: str) -> str:
 
 def explain_scan_nans(res, field) -> str | None:
     """One line on the NaN LOS of `res` in `field` (None when there are none): how many gate
-    centres lie outside the field's grid (its extent named) and what to change."""
+    centres lie outside the field's grid (its extent named), how many inside it where it has
+    no value (terrain, a solid, outside the mesh), and what to change."""
     los = np.asarray(res.los)
     if not np.isnan(los).any():
         return None
     share = f"{np.isnan(los).mean():.1%} of the LOS are NaN"
-    grid = getattr(field, "grid", field)
-    if not all(hasattr(grid, a) for a in ("x", "y", "z")):
-        return f"{share} (probe nodes outside the field or in a solid)"
-    axes = [np.asarray(getattr(grid, a), np.float64) for a in ("x", "y", "z")]
     pts = np.asarray(res.points, np.float64)
+    grid = getattr(field, "grid", field)
     out = np.zeros(pts.shape[:-1], bool)
-    for k, a in enumerate(axes):
-        out |= (pts[..., k] < a.min()) | (pts[..., k] > a.max())
-    extent = ", ".join(f"{n} {a.min():g}..{a.max():g}" for n, a in zip("xyz", axes, strict=True))
+    extent = ""
+    if all(hasattr(grid, a) for a in ("x", "y", "z")):
+        axes = [np.asarray(getattr(grid, a), np.float64) for a in ("x", "y", "z")]
+        for k, a in enumerate(axes):
+            out |= (pts[..., k] < a.min()) | (pts[..., k] > a.max())
+        extent = " (" + ", ".join(f"{n} {a.min():g}..{a.max():g}"
+                                  for n, a in zip("xyz", axes, strict=True)) + " m as read)"
+    dry = ~np.isfinite(np.asarray(field.sample(jnp.asarray(pts)))).all(axis=-1) & ~out
+    parts = []
     if out.any():
-        return (f"{share}: {int(out.sum())} of {out.size} gate centres lie outside the CFD "
-                f"field ({extent} m, as read for this scan); fewer --gates, a shorter "
-                "--gate-length or another --elevation keeps the scan inside")
-    return (f"{share}: every gate centre is inside the CFD field ({extent} m); the rest are "
-            "probe nodes outside it or in a solid (try --probe point to see which)")
+        parts.append(f"{int(out.sum())} of {out.size} gate centres lie outside the CFD "
+                     f"field{extent}")
+    if dry.any():
+        parts.append(f"{int(dry.sum())} gate centres lie inside the field where it has no value "
+                     "(terrain, a solid or outside the mesh)")
+    if not parts:
+        return (f"{share}: every gate centre has a value; probe nodes around them lie outside "
+                "the field or in a solid (--probe point samples the centres only)")
+    return (f"{share}: " + "; ".join(parts) + "; fewer --gates, a shorter --gate-length, "
+            "another --elevation or lidar location keeps the scan in the flow")
 
 
 def rhi_plane(directions, elevation, rel) -> np.ndarray:
