@@ -90,8 +90,9 @@ def register(sub) -> None:
                "same field in time instead: --scans N repetitions (default: as many as cover "
                "--hours). It writes series_scan.nc (CF NetCDF, time x beam x range: LOS, ray "
                "times, azimuth, elevation, flags), series_scan.png (the last scan on its cone or "
-               "plane; not with --no-plots) and, for a PPI or VAD of 3 rays or more, series_vad.csv (each scan's "
-               "VAD wind profile per gate). The 10-minute .sta statistics are the profilers' and "
+               "plane; not with --no-plots) and, for a PPI or VAD of 3 rays or more, "
+               "series_vad.csv (each scan's VAD wind profile per gate). The 10-minute .sta "
+               "statistics are the profilers' and "
                "are not written for a scanning scan.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("settings", help="the seed's settings.dat (location, angles, heights)")
