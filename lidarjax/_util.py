@@ -13,10 +13,12 @@ import math
 import os
 import re
 import uuid
+import weakref
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import ModuleType
 
+import jax
 import numpy as np
 
 __all__: list[str] = []
@@ -133,3 +135,41 @@ def summarise_lines(lines: Sequence[int], limit: int = 8) -> str:
     return shown if len(lines) <= limit else f"{shown}, ... ({len(lines)} lines)"
 
 
+
+
+class ArrayMemo:
+    """Host-side results memoised on the *identity* of the JAX arrays they were computed from
+    (a probe's nodes chosen for a field and ranges: `simulate` would otherwise redo that
+    choice, and its device-to-host reads, on every call).
+
+    JAX arrays are immutable, so the same objects give the same result. An entry is dropped
+    as soon as any of its arrays is garbage-collected (weak references), so an identity is
+    never reused for other values; at most `size` entries are kept (oldest dropped). Inputs
+    holding anything but concrete JAX arrays (numpy arrays are mutable, tracers have no
+    value) are not memoised: `compute` runs every time.
+    """
+
+    def __init__(self, size: int = 64):
+        self._size = size
+        self._entries: dict = {}
+
+    def __call__(self, trees, compute):
+        leaves, treedef = jax.tree_util.tree_flatten(trees)
+        if not leaves or not all(isinstance(a, jax.Array) and not isinstance(a, jax.core.Tracer)
+                                 for a in leaves):
+            return compute()
+        try:
+            key = (treedef, tuple(id(a) for a in leaves))
+            hash(key)
+        except TypeError:  # unhashable static metadata
+            return compute()
+        hit = self._entries.get(key)
+        if hit is not None and all(r() is a for r, a in zip(hit[0], leaves, strict=True)):
+            return hit[1]
+        value = compute()
+        drop = lambda _ref, k=key: self._entries.pop(k, None)  # noqa: E731
+        refs = tuple(weakref.ref(a, drop) for a in leaves)
+        if len(self._entries) >= self._size:
+            self._entries.pop(next(iter(self._entries)))
+        self._entries[key] = (refs, value)
+        return value

@@ -24,7 +24,7 @@ import numpy as np
 from .._util import atomic_path
 from ..frames import body_to_cfd_rotation
 from ..io import read_hpl, read_windcube_scan
-from ..probe import PointProbe
+from ..probe import CWProbe, PointProbe
 from ..scanning import (
     INSTRUMENTS,
     gate_ranges,
@@ -172,8 +172,6 @@ def scanning_probe(args, gate_length: float):
                              "--probe pulsed or --probe cw, or drop it")
         return PointProbe()
     if args.probe == "cw":
-        from ..probe import CWProbe  # noqa: PLC0415
-
         return CWProbe() if args.probe_nodes is None else CWProbe(n_nodes=args.probe_nodes)
     return instrument_probe(args.instrument or _DEFAULT_INSTRUMENT, gate_length=gate_length,
                             n_nodes=args.probe_nodes)
