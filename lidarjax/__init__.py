@@ -122,6 +122,7 @@ from .scanning import ScanResult as ScanResult
 from .scanning import VadProfile as VadProfile
 from .scanning import crossing_geometry as crossing_geometry
 from .scanning import dual_doppler as dual_doppler
+from .scanning import gate_nodes as gate_nodes
 from .scanning import gate_ranges as gate_ranges
 from .scanning import instrument_probe as instrument_probe
 from .scanning import ppi as ppi

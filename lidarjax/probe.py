@@ -88,6 +88,7 @@ from __future__ import annotations
 
 import abc
 import functools
+import math
 import warnings
 
 import equinox as eqx
@@ -809,6 +810,95 @@ def _beam_los(field, origin_local, directions, ranges, probe, los=None):
     tail = jnp.asarray(getattr(probe, "tail", 0.0)).astype(ranges.dtype)
     truncated = (1 - total) > tail
     return los, truncated
+
+
+def shared_gate_rule(probe, ranges) -> tuple[int, int] | None:
+    """Host choice of the shared-node rule for equally spaced range gates (`_gates_los`):
+    ``(m, J)`` with ``m`` nodes per gate spacing and ``2 J + 1`` nodes per gate, or ``None``
+    where every gate keeps its own nodes (`_beam_los`).
+
+    The rule samples each beam once, every ``h = spacing / m`` from the first gate, and
+    weights node ``j`` of a gate (``j = -J..J``, offset ``j h`` from its centre) by
+    ``phi(j h)``; neighbouring gates share their nodes. ``h`` is at most the spacing of the
+    probe's own rule (``2 support / n_nodes``, chosen for the field's resolution), so its
+    error, the weighting's transfer function at the alias ``2 pi / h - k``, stays within the
+    same tolerance, and ``J h`` covers the support. It applies to a `PulsedProbe` (a
+    weighting independent of range) at 2 or more gates equally spaced to 1e-9 (host numbers),
+    when it samples fewer points than per-gate nodes do."""
+    if not isinstance(probe, PulsedProbe) or not is_concrete(probe, ranges):
+        return None
+    r = np.asarray(ranges, np.float64).reshape(-1)
+    if r.size < 2 or not np.all(np.isfinite(r)):
+        return None
+    d = np.diff(r)
+    if not (d[0] > 0 and np.allclose(d, d[0], rtol=1e-9, atol=0.0)):
+        return None
+    support = float(probe.support())
+    m = max(1, math.ceil(d[0] * probe.n_nodes / (2 * support) - 1e-9))
+    half = int(math.floor(support * m / d[0] + 1e-9))
+    if half < 1 or m >= 2 * half + 1:
+        return None
+    return m, half
+
+
+def _host_gate_nodes(probe, ranges, rule):
+    """Host ``(offsets, weights)`` ``(g, q)`` of every gate at `ranges` ``(g,)`` as the
+    simulator integrates them: the shared-node `rule` ``(m, J)`` (`shared_gate_rule`) or,
+    with ``None``, the probe's own nodes per gate. Nodes the cut at the lidar drops have
+    weight 0; each gate's weights sum to 1."""
+    r = np.asarray(ranges, np.float64).reshape(-1)
+    if rule is None:
+        offsets, weights = probe._host_nodes(r)
+    else:
+        m, half = rule
+        h = (r[1] - r[0]) / m
+        offsets = np.broadcast_to((np.arange(2 * half + 1) - half) * h, (r.size, 2 * half + 1))
+        rp = float(probe.pulse_fwhm) / (2 * np.sqrt(np.log(2.0)))
+        dp = float(probe.gate_length)
+        weights = (special.erf((offsets + dp / 2) / rp) - special.erf((offsets - dp / 2) / rp)) / (2 * dp)
+    weights = np.where(np.abs(offsets) < r[:, None], weights, 0.0)
+    total = weights.sum(axis=-1, keepdims=True)
+    return np.array(offsets), weights / np.where(total > 0, total, 1.0)
+
+
+def _gates_los(field, origin_local, directions, ranges, probe, rule, los=None):
+    """`_beam_los` for equally spaced gates ``(g,)`` with the shared-node rule ``(m, J)`` of
+    `shared_gate_rule`: LOS ``(g, b)`` and the truncation flags ``(g, 1)``. `los` (as in
+    `_beam_los`) is called with points ``(b, L, 3)`` and directions ``(b, 1, 3)``: a leading
+    time axis of its result broadcasts against ``(b, L)``.
+
+    The beam is sampled at ``L = (g - 1) m + 2 J + 1`` ranges ``r_0 + (l - J) h``; gate ``i``
+    takes nodes ``i m .. i m + 2 J``. The lidar cut, NaN and derivative rules are those of
+    `_beam_los` (nodes ``|j h| >= r_i`` are dropped, the weights renormalised; the flag
+    compares the kept weight of the weighting itself with `tail`). Every number stays
+    dynamic: the gates' first range and spacing, and the probe's pulse and gate length."""
+    m, half = rule
+    los_fn = field.los_local if los is None else los
+    g = ranges.shape[0]
+    dtype = ranges.dtype
+    h = (ranges[1] - ranges[0]) / m
+    n_fine = (g - 1) * m + 2 * half + 1
+    fine = ranges[0] + (jnp.arange(n_fine, dtype=dtype) - half) * h  # (L,)
+    # beam-major (b, L): consecutive samples lie along one beam, so the field's cells they
+    # read are neighbours in memory
+    pts = origin_local + fine[None, :, None] * directions[:, None, :]  # (b, L, 3)
+    fine_los = los_fn(pts, directions[:, None, :])  # (..., b, L)
+    # each gate's window, read by one index gather from the sampled beam (strided slices
+    # would be separate consumers, into which the compiler copies the field's interpolation)
+    window = np.arange(g)[:, None] * m + np.arange(2 * half + 1)[None, :]  # (g, q)
+    los_q = fine_los[..., window]  # (..., b, g, q)
+    offsets = (jnp.arange(2 * half + 1, dtype=dtype) - half) * h  # (q,)
+    ahead = jnp.abs(offsets) < ranges[:, None]  # (g, q)
+    kept = jnp.where(ahead, probe.weight(offsets).astype(dtype), 0)
+    shape = los_q.shape
+    los = _probe_mean(los_q, jnp.broadcast_to(kept, shape), jnp.broadcast_to(ahead, shape))
+    los = jnp.swapaxes(los, -1, -2)  # (..., g, b)
+    # the flag: the weighting's own kept weight at each gate, as `_beam_los` computes it
+    off_p, w_p = probe.nodes(ranges)
+    total = jnp.sum(jnp.where(jnp.abs(off_p.astype(dtype)) < ranges[:, None], w_p.astype(dtype), 0),
+                    axis=-1)
+    tail = jnp.asarray(probe.tail).astype(dtype)
+    return los, ((1 - total) > tail)[:, None]
 
 
 @jax.custom_jvp

@@ -4,7 +4,8 @@ time, and the reconstructions they feed (VAD/DBS profiles, dual-Doppler vectors)
 
 - `pattern`: `ScanPattern`, one repetition of a scan (rays, timing, gates).
 - `presets`: `ppi`, `rhi`, `stare`, `vad`, `spinner_rosette`, `instrument_probe`.
-- `simulate`: `simulate_scan` (steady), `simulate_scan_series` (through time), `ScanResult`.
+- `simulate`: `simulate_scan` (steady), `simulate_scan_series` (through time), `ScanResult`,
+  `gate_nodes` (the range-weighting quadrature of every gate).
 - `profiles`: `vad_fit`, the per-gate least-squares sine fit at any elevation.
 - `dual`: `dual_doppler`, vectors where two lidars' beams cross.
 
@@ -32,5 +33,6 @@ from .presets import vad as vad
 from .profiles import VadProfile as VadProfile
 from .profiles import vad_fit as vad_fit
 from .simulate import ScanResult as ScanResult
+from .simulate import gate_nodes as gate_nodes
 from .simulate import simulate_scan as simulate_scan
 from .simulate import simulate_scan_series as simulate_scan_series

@@ -23,15 +23,24 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._precision import difference, is_concrete
+from .._util import ArrayMemo
 from ..field import AbstractField, DirectSampler
 from ..flags import Flag
 from ..frames import body_to_cfd_rotation, lidar_to_cfd_rotation, rotate
 from ..motion import AbstractMotion
 from ..mount import Mount
-from ..probe import AbstractProbe, PointProbe, _beam_los, probe_for_ranges
+from ..probe import (
+    AbstractProbe,
+    PointProbe,
+    _beam_los,
+    _gates_los,
+    _host_gate_nodes,
+    probe_for_ranges,
+    shared_gate_rule,
+)
 from .pattern import ScanPattern
 
-__all__ = ["ScanResult", "simulate_scan", "simulate_scan_series"]
+__all__ = ["ScanResult", "gate_nodes", "simulate_scan", "simulate_scan_series"]
 
 
 class ScanResult(eqx.Module):
@@ -72,19 +81,68 @@ def _validate(fn, field, pattern, mount, probe):
         raise ValueError(f"{fn}: `probe` must be a lidarjax probe, got {type(probe).__name__}.")
 
 
-def _refine(field, pattern, probe, caller):
-    if isinstance(probe, PointProbe) or not is_concrete(pattern.ranges):
-        return probe
-    try:
-        resolution = field.resolution
-    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-        return probe
-    return probe_for_ranges(probe, resolution, np.asarray(pattern.ranges, np.float64), caller=caller)
+def _scalar(value, dtype):
+    """`value` as a 0-d array of `dtype`: a host number stays on the host (the compiled call
+    transfers it with its other arguments), a JAX value keeps its trace."""
+    if isinstance(value, (int, float, np.number, np.ndarray)):
+        return np.asarray(value, dtype)
+    return jnp.asarray(value).astype(dtype)
+
+
+_CHOSEN = ArrayMemo()  # the nodes chosen for a (field, ranges, probe), by their arrays' identity
+
+
+def _refine(field, pattern, probe, caller, shared=True):
+    """The probe's nodes chosen for the field's resolution, and the shared-node rule of the
+    gates (`lidarjax.probe.shared_gate_rule`; None: per-gate nodes, always without
+    `shared`), host choices memoised on the inputs' arrays."""
+    if isinstance(probe, PointProbe) or not is_concrete(pattern.ranges, probe):
+        return probe, None
+    if not shared:
+        return _refine(field, pattern, probe, caller)[0], None
+
+    def choose():
+        chosen = probe
+        if getattr(probe, "auto_nodes", False):
+            try:
+                resolution = field.resolution
+            except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+                resolution = None
+            chosen = probe_for_ranges(probe, resolution, np.asarray(pattern.ranges, np.float64),
+                                      caller=caller)
+        return chosen, shared_gate_rule(chosen, pattern.ranges)
+
+    return _CHOSEN((field, pattern.ranges, probe), choose)
+
+
+def gate_nodes(field: AbstractField, pattern: ScanPattern, probe: AbstractProbe, *,
+               shared_nodes: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The range-weighting quadrature `simulate_scan` integrates every gate of `pattern`
+    with in `field`: host ``(offsets, weights)``, each ``(g, q)``, offsets in m from the
+    gate centre along the beam (positive away from the lidar), weights summing to 1 per gate
+    (0 for nodes the cut at the lidar drops).
+
+    A `lidarjax.PulsedProbe` on equally spaced gates shares its nodes between neighbouring
+    gates (`shared_nodes`, the default): each beam is sampled once every ``h`` (at most the
+    spacing the probe's own rule needs for the field's resolution, and a whole fraction of
+    the gate spacing) and a gate weights the samples within its support by the weighting
+    ``phi``. Otherwise, and with ``shared_nodes=False``, every gate has the probe's own
+    nodes (`PulsedProbe.nodes`, `CWProbe.nodes`). Both integrate the weighting's transfer
+    function within 0.01 up to the field's Nyquist wavenumber. The point probe: one node of
+    weight 1 at every gate.
+    """
+    probe = PointProbe() if probe is None else probe
+    _validate("gate_nodes", field, pattern, Mount([0.0, 0.0, 0.0]), probe)
+    ranges = np.asarray(pattern.ranges, np.float64)
+    if isinstance(probe, PointProbe):
+        return np.zeros((ranges.size, 1)), np.ones((ranges.size, 1))
+    probe, rule = _refine(field, pattern, probe, "gate_nodes", shared_nodes)
+    return _host_gate_nodes(probe, ranges, rule)
 
 
 def simulate_scan(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
                   probe: AbstractProbe | None = None,
-                  start: Float[ArrayLike, ""] = 0.0) -> ScanResult:
+                  start: Float[ArrayLike, ""] = 0.0, shared_nodes: bool = True) -> ScanResult:
     """LOS of every (ray, gate) of `pattern` in a steady `field`.
 
     **Arguments:**
@@ -98,20 +156,25 @@ def simulate_scan(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
       lidar: `lidarjax.scanning.instrument_probe`). Nodes without an explicit count are
       chosen for the field's resolution.
     - `start`: time of the scan start, s (only shifts `times`).
+    - `shared_nodes`: a pulsed probe on equally spaced gates samples each beam once and
+      shares the nodes between neighbouring gates (default; `gate_nodes` gives the rule);
+      ``False``: every gate has its own nodes. Both integrate the probe within the same
+      tolerance; sharing samples the field 2-4 times less.
 
     **Returns:** a `ScanResult`; its dtype follows the field's. Jit-compiled; every number is
     differentiable (field values, angles, rates, ranges, mount, probe).
     """
     probe = PointProbe() if probe is None else probe
     _validate("simulate_scan", field, pattern, mount, probe)
-    probe = _refine(field, pattern, probe, "simulate_scan")
-    return _steady_jit(field, pattern, mount, probe, jnp.asarray(start, field.dtype))
+    probe, rule = _refine(field, pattern, probe, "simulate_scan", shared_nodes)
+    return _steady_jit(field, pattern, mount, probe, _scalar(start, field.dtype), rule=rule)
 
 
 def simulate_scan_series(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
                          n_scans: int = 1, start: Float[ArrayLike, ""] = 0.0,
                          probe: AbstractProbe | None = None,
-                         motion: AbstractMotion | None = None) -> ScanResult:
+                         motion: AbstractMotion | None = None,
+                         shared_nodes: bool = True) -> ScanResult:
     """Fly `n_scans` repetitions of `pattern` (every `ScanPattern.period` from `start`, s)
     through a time-dependent `field`: every sub-ray samples the field at its own time
     (`AbstractField.los_local_at`), so a moving beam averages over its swept arc *and* over
@@ -129,7 +192,8 @@ def simulate_scan_series(field: AbstractField, pattern: ScanPattern, mount: Moun
     field's minus the lidar's own velocity along the beam; `points` and `directions` stay
     those of the mount at rest.
 
-    **Arguments:** as `simulate_scan`, plus `n_scans` (static: shapes) and `motion`.
+    **Arguments:** as `simulate_scan`, plus `n_scans` (static: shapes) and `motion` (with a
+    motion every gate has its own nodes: the beams move during the scan).
     **Returns:** a `ScanResult` with `los` and `flags` ``(n, r, g)`` and `times` ``(n, r)``.
     """
     probe = PointProbe() if probe is None else probe
@@ -141,9 +205,9 @@ def simulate_scan_series(field: AbstractField, pattern: ScanPattern, mount: Moun
     if motion is not None and not isinstance(motion, AbstractMotion):
         raise ValueError(f"simulate_scan_series: `motion` must be a lidarjax motion (SinusoidalMotion, "
                          f"SampledMotion), got {type(motion).__name__}.")
-    probe = _refine(field, pattern, probe, "simulate_scan_series")
-    return _series_jit(field, pattern, mount, probe, jnp.asarray(start, field.dtype), motion,
-                       n_scans=int(n_scans))
+    probe, rule = _refine(field, pattern, probe, "simulate_scan_series", shared_nodes)
+    return _series_jit(field, pattern, mount, probe, _scalar(start, field.dtype), motion,
+                       n_scans=int(n_scans), rule=None if motion is not None else rule)
 
 
 def _moving_los(field, pattern, mount_d, origin_local, probe, t_sub, motion):
@@ -171,8 +235,9 @@ def _moving_los(field, pattern, mount_d, origin_local, probe, t_sub, motion):
     return jnp.moveaxis(los.reshape(n_scans, b, g), 1, 2)  # (n, g, B)
 
 
-def _core(field, pattern, mount, probe, start, n_scans, motion=None):
-    """The scan in one mount's geometry; `n_scans` None: steady."""
+def _core(field, pattern, mount, probe, start, n_scans, motion=None, rule=None):
+    """The scan in one mount's geometry; `n_scans` None: steady; `rule`: the gates' shared
+    nodes (`lidarjax.probe.shared_gate_rule`), None: per-gate nodes."""
     dtype = field.dtype
     cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
     origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo,
@@ -185,15 +250,24 @@ def _core(field, pattern, mount, probe, start, n_scans, motion=None):
     # every ray has the same gates: the probe's nodes are computed once per gate, (g, 1),
     # and broadcast over the rays by `_beam_los` (its points are (g, B, q, 3))
     ranges = pattern.ranges[:, None]
+
+    def beam_los(los=None):
+        if rule is None:
+            return _beam_los(field, origin_local, n_cfd, ranges, probe, los=los)
+        return _gates_los(field, origin_local, n_cfd, pattern.ranges, probe, rule, los=los)
+
     if n_scans is None:
-        los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)
+        los, truncated = beam_los()
         times = start + pattern.ray_times()
     else:
         scans = jnp.arange(n_scans, dtype=dtype)[:, None, None] * pattern.period
         t_sub = (start + scans + pattern.sub_times()[None]).reshape(n_scans, 1, r * k)  # (n, 1, B)
 
         def los_at(pts, dirs):
-            t = t_sub[..., None] if pts.ndim == 4 else t_sub
+            if rule is not None:  # shared gate nodes: points (B, L, 3)
+                t = jnp.swapaxes(t_sub, -1, -2)
+            else:  # points (g, B, q, 3) or (g, B, 3)
+                t = t_sub[..., None] if pts.ndim == 4 else t_sub
             sampler = field.time_sampler(pts, dirs, n_times=n_scans)
             if isinstance(sampler, DirectSampler):
                 # no preparation pays: sample directly with times that broadcast (one per
@@ -203,7 +277,7 @@ def _core(field, pattern, mount, probe, start, n_scans, motion=None):
             return sampler(t)
 
         if motion is None:
-            los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)
+            los, truncated = beam_los(los_at)
         else:  # the probe's cut at the lidar does not move with it: flags from the rest geometry
             truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)[1]
             los = _moving_los(field, pattern, mount_d, origin_local, probe, t_sub, motion)
@@ -222,21 +296,22 @@ def _core(field, pattern, mount, probe, start, n_scans, motion=None):
                       flags=flags.astype(jnp.int32))
 
 
-def _run(field, pattern, mount, probe, start, n_scans, motion=None):
+def _run(field, pattern, mount, probe, start, n_scans, motion=None, rule=None):
     # tiny rotation products keep the field's precision (TF32 on GPUs; see lidarjax.forward)
     with jax.default_matmul_precision("highest"):
         if mount.batch_shape:
-            return jax.vmap(lambda m: _core(field, pattern, m, probe, start, n_scans, motion))(mount)
-        return _core(field, pattern, mount, probe, start, n_scans, motion)
+            return jax.vmap(lambda m: _core(field, pattern, m, probe, start, n_scans, motion,
+                                            rule))(mount)
+        return _core(field, pattern, mount, probe, start, n_scans, motion, rule)
 
 
-def _steady(field, pattern, mount, probe, start):
-    return _run(field, pattern, mount, probe, start, None)
+def _steady(field, pattern, mount, probe, start, *, rule=None):
+    return _run(field, pattern, mount, probe, start, None, rule=rule)
 
 
-def _series(field, pattern, mount, probe, start, motion, *, n_scans):
-    return _run(field, pattern, mount, probe, start, n_scans, motion)
+def _series(field, pattern, mount, probe, start, motion, *, n_scans, rule=None):
+    return _run(field, pattern, mount, probe, start, n_scans, motion, rule)
 
 
-_steady_jit = jax.jit(_steady)
-_series_jit = jax.jit(_series, static_argnames=("n_scans",))
+_steady_jit = jax.jit(_steady, static_argnames=("rule",))
+_series_jit = jax.jit(_series, static_argnames=("n_scans", "rule"))

@@ -200,17 +200,27 @@ def wave():
                           jnp.array([0.02, 0.015, 0.01]), jnp.asarray(0.4))
 
 
-def test_fourier_mode_stare_series_closed_form(wave):
-    """A stare: LOS_n(r) = n.U + A n_y W(k.n) cos(k.n r - omega t_n), with W the probe's
-    node transfer function at the beam-wise wavenumber (exact for the quadrature)."""
+@pytest.mark.parametrize("shared", [True, False])
+def test_fourier_mode_stare_series_closed_form(wave, shared):
+    """A stare: LOS_n(r) = n.U + A n_y W(k.n) cos(k.n r - omega t_n), with W the transfer
+    function of the gate's quadrature at the beam-wise wavenumber (exact for the
+    quadrature): the probe's own nodes per gate, ``lidarjax.probe_transfer(model="nodes")``,
+    or the nodes the gates share, ``sum w cos(k o)`` over `gate_nodes`."""
     probe = lj.PulsedProbe(30.0, 30.0, n_nodes=9)
     p = sc.stare(30.0, 20.0, RANGES, n_rays=4, accumulation=1.0)
-    res = sc.simulate_scan_series(wave, p, lj.Mount([0.0, 0.0, 0.0]), n_scans=3, start=2.0, probe=probe)
+    res = sc.simulate_scan_series(wave, p, lj.Mount([0.0, 0.0, 0.0]), n_scans=3, start=2.0, probe=probe,
+                                  shared_nodes=shared)
     n = np.asarray(sc.ray_unit_vectors(30.0, 20.0))
     kn = float(np.asarray(wave.wavevector) @ n)
     times = 2.0 + 4.0 * np.arange(3)[:, None] + 0.5 + np.arange(4)[None, :]
     np.testing.assert_allclose(np.asarray(res.times), times, atol=1e-12)
-    w = np.array([lj.probe_transfer(probe, kn, r, model="nodes") for r in np.asarray(RANGES)])
+    if shared:
+        offsets, weights = sc.gate_nodes(wave, p, probe)
+        h = offsets[0, 1] - offsets[0, 0]  # a whole fraction of the 30 m gate spacing, at most
+        assert 30.0 / h == pytest.approx(round(30.0 / h)) and h <= 2 * float(probe.support()) / 9
+        w = np.sum(weights * np.cos(kn * offsets), axis=-1)
+    else:
+        w = np.array([lj.probe_transfer(probe, kn, r, model="nodes") for r in np.asarray(RANGES)])
     expect = (n @ np.asarray(wave.mean) + 1.5 * n[1] * w[None, None, :]
               * np.cos(kn * np.asarray(RANGES)[None, None, :] - 0.4 * times[..., None]))
     np.testing.assert_allclose(np.asarray(res.los), expect, atol=1e-12)
