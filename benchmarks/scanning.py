@@ -2,27 +2,31 @@
 sampling.
 
 1. **PPI in a grid.** A 360-ray x 200-gate PPI (Windcube 200S-like: 25 m gates, 100 ns pulse,
-   `lidarjax.PulsedProbe` per gate with the nodes `simulate_scan` chooses for the grid) in a
-   200 x 200 x 100 `GridField` of 50 m spacing (10 x 10 x 5 km), float64 and float32:
-   median wall time of `lidarjax.simulate_scan` after compilation (the whole call: validation,
-   probe choice, the jit-compiled model), and a numpy implementation of the same sampling
-   (trilinear interpolation written out, the same probe nodes) for the ratio; also the CPU
-   time per call (summed over threads: the work, whatever else shares the machine). Target:
-   at most 20 ms on the project's 2-core CPU.
+   `lidarjax.PulsedProbe` with the nodes `simulate_scan` chooses for the grid, shared
+   between neighbouring gates: `lidarjax.gate_nodes`) in a 200 x 200 x 100 `GridField` of
+   50 m spacing (10 x 10 x 5 km), float64 and float32: median wall time of
+   `lidarjax.simulate_scan` after compilation (the whole call: validation, probe choice, the
+   jit-compiled model), also with the nodes chosen once (an explicit count) and with
+   per-gate nodes (``shared_nodes=False``), and the CPU time per call (summed over threads:
+   the work, whatever else shares the machine). Target: at most 20 ms on the project's 2-core
+   CPU, 1 ms on an H100.
 2. **A 10-minute series of 1 Hz rays at 200 gates through a turbulence box**
    (`lidarjax.scenes.FrozenTurbulence`: the 512 x 32 x 64 Mann box of 4 x 8 x 4 m of
    `benchmarks/series.py`, over a 10 m/s uniform wind; Halo-like 30 m gates, 0.2 us pulse):
    (a) a stare at 60 degrees elevation (600 rays of 1 s), (b) a 60-ray step-and-stare PPI
-   at 5 degrees repeated 10 times. `lidarjax.simulate_scan_series`
-   against numpy sampling every probe node of every ray at its own time (periodic box), one
-   vectorised call per ray: trilinear written out in numpy, and scipy's RegularGridInterpolator
-   on the periodically padded box as `benchmarks/series.py` does. Target: at least 50x.
+   at 5 degrees repeated 10 times. `lidarjax.simulate_scan_series` against numpy sampling
+   every ray at its own time (periodic box), one vectorised call per ray: trilinear written
+   out in numpy, and scipy's RegularGridInterpolator on the periodically padded box as
+   `benchmarks/series.py` does. Target: at least 50x.
 
-The two sides agree to rounding (checked; the largest difference is reported). Timings are
-medians over repeats; the machine is shared (its load average is recorded).
+The numpy side integrates the very quadrature `lidarjax.gate_nodes` reports, in two layouts:
+every node of every gate (``per_gate``, shared nodes sampled again), and every distinct node
+once (``shared``, as lidarjax does); the ratio is against the faster. The two sides agree to
+rounding (checked; the largest difference is reported). Timings are medians over repeats;
+the machine is shared (its load average is recorded).
 
-Run: ``PYTHONPATH=$PWD python3 benchmarks/scanning.py [--quick]``. Writes
-``benchmarks/results/scanning.{json,png}``.
+Run: ``PYTHONPATH=$PWD python3 benchmarks/scanning.py [--quick] [--out DIR --name STEM]``.
+Writes ``benchmarks/results/scanning.{json,png}``.
 """
 
 from __future__ import annotations
@@ -64,19 +68,30 @@ def np_grid_los(vel, origin, spacing, pts, n):
     return np.where(inside, out, np.nan)
 
 
-def np_probe_mean(los_q, offsets, weights, ranges):
-    ahead = np.abs(offsets) < ranges[..., None]
-    kept = np.where(ahead, weights, 0)
-    return np.sum(np.where(ahead, kept * los_q, 0), axis=-1) / np.sum(kept, axis=-1)
+def np_windows(los_fine, window, weights):
+    """Gate values ``(..., g)`` from samples ``(..., L)``: ``sum_j w_gj los[window_gj]``, NaN
+    where a node of nonzero weight is NaN."""
+    los_q = los_fine[..., window]  # (..., g, q)
+    kept = weights > 0
+    bad = np.any(np.isnan(los_q) & kept, axis=-1)
+    return np.where(bad, np.nan, np.sum(np.where(kept, weights * np.nan_to_num(los_q), 0.0), axis=-1))
 
 
-def np_ppi(vel, origin, spacing, loc, az, el, ranges, offsets, weights):
+def layouts(ranges, offsets, weights):
+    """Two ways to lay out the same quadrature (`lidarjax.gate_nodes`) along a beam:
+    ``per_gate`` samples every node of every gate (shared nodes twice), ``shared`` every
+    distinct node range once. Each: (sample ranges (L,), window (g, q))."""
+    node_r = ranges[:, None] + offsets
+    per_gate = (node_r.ravel(), np.arange(node_r.size).reshape(node_r.shape))
+    distinct, inverse = np.unique(np.round(node_r, 9), return_inverse=True)
+    return {"per_gate": per_gate, "shared": (distinct, inverse.reshape(node_r.shape))}
+
+
+def np_ppi(vel, origin, spacing, loc, az, el, fine, window, weights):
     a, e = np.deg2rad(az), np.deg2rad(el)
     n = np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.full_like(a, np.sin(e))], -1)
-    r = ranges[:, None] + offsets  # (g, q)
-    pts = loc + r[None, :, :, None] * n[:, None, None, :]  # (b, g, q, 3)
-    los_q = np_grid_los(vel, origin, spacing, pts, n[:, None, None, :])
-    return np_probe_mean(los_q, offsets[None], weights[None], ranges[None, :])
+    pts = loc + fine[None, :, None] * n[:, None, :]  # (b, L, 3)
+    return np_windows(np_grid_los(vel, origin, spacing, pts, n[:, None, :]), window, weights)
 
 
 def np_box_fluct(box_vel, spacing, axes, anchor, shift, speed, pts, t):
@@ -124,17 +139,16 @@ class RgiBox:
         return self.rgi(q.reshape(-1, 3)).reshape(q.shape) @ axes
 
 
-def np_series(mean, box_vel, spacing, axes, anchor, shift, speed, loc, az, el, t_ray, ranges, offsets,
+def np_series(mean, box_vel, spacing, axes, anchor, shift, speed, loc, az, el, t_ray, fine, window,
               weights, fluct=np_box_fluct):
-    """One vectorised call per ray: its probe nodes at its time."""
-    out = np.empty((az.size, ranges.size))
-    r = ranges[:, None] + offsets
+    """One vectorised call per ray: its samples at its time, then the gates' windows."""
+    out = np.empty((az.size, window.shape[0]))
     for i in range(az.size):
         a, e = np.deg2rad(az[i]), np.deg2rad(el[i])
         n = np.array([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)])
-        pts = loc + r[..., None] * n
+        pts = loc + fine[:, None] * n
         v = mean + fluct(box_vel, spacing, axes, anchor, shift, speed, pts, t_ray[i])
-        out[i] = np_probe_mean(v @ n, offsets, weights, ranges)
+        out[i] = np_windows(v @ n, window, weights)
     return out
 
 
@@ -159,24 +173,32 @@ def ppi_case(dtype, repeats):
     for _ in range(repeats):
         lj.simulate_scan(field, pattern, mount, probe=probe).los.block_until_ready()
     cpu_ms = 1e3 * (time.process_time() - cpu) / repeats  # summed over threads: the work
-    chosen = _refine(field, pattern, probe, "benchmark")
+    chosen, rule = _refine(field, pattern, probe, "benchmark")
     # the nodes chosen once (`lidarjax.probe_for_field`, or an explicit count): no host-side
     # choice per call, the call is validation and the compiled model
-    t_fixed = median_time(lambda: lj.simulate_scan(field, pattern, mount, probe=chosen).los.block_until_ready(),
-                          repeats)
-    offsets, weights = chosen._host_nodes(np.asarray(pattern.ranges))
-    args = (vel.astype(np.float64), np.array([-5000.0, -5000.0, 0.0]), dx, np.array([0.0, 0.0, 10.0]),
-            np.asarray(pattern.azimuth, np.float64), 3.0, np.asarray(pattern.ranges, np.float64),
-            offsets, weights)
-    ref = np_ppi(*args)
-    t_np = median_time(lambda: np_ppi(*args), max(3, repeats // 5))
-    diff = float(np.nanmax(np.abs(np.asarray(res.los, np.float64) - ref)))
+    fixed = chosen.with_nodes(chosen.n_nodes)
+    t_fixed = median_time(
+        lambda: lj.simulate_scan(field, pattern, mount, probe=fixed).los.block_until_ready(), repeats)
+    t_own = median_time(lambda: lj.simulate_scan(field, pattern, mount, probe=probe,
+                                                 shared_nodes=False).los.block_until_ready(), repeats)
+    ranges = np.asarray(pattern.ranges, np.float64)
+    offsets, weights = lj.gate_nodes(field, pattern, probe)
+    base = (vel.astype(np.float64), np.array([-5000.0, -5000.0, 0.0]), dx, np.array([0.0, 0.0, 10.0]),
+            np.asarray(pattern.azimuth, np.float64), 3.0)
+    np_ms, diff = {}, 0.0
+    for name, (fine, window) in layouts(ranges, offsets, weights).items():
+        ref = np_ppi(*base, fine, window, weights)
+        np_ms[name] = 1e3 * median_time(lambda f=fine, w=window: np_ppi(*base, f, w, weights),
+                                        max(3, repeats // 5))
+        diff = max(diff, float(np.nanmax(np.abs(np.asarray(res.los, np.float64) - ref))))
+    samples = layouts(ranges, offsets, weights)["shared"][0].size
     return {"dtype": np.dtype(dtype).name, "rays": 360, "gates": 200, "grid": [200, 200, 100],
-            "probe_nodes": chosen.n_nodes, "samples": 360 * 200 * chosen.n_nodes,
+            "probe_nodes": chosen.n_nodes, "nodes_per_gate": offsets.shape[1], "shared_rule": rule,
+            "samples": 360 * samples, "samples_per_gate_layout": 360 * offsets.size,
             "compile_s": compile_s, "lidarjax_ms": 1e3 * t_jax, "lidarjax_cpu_ms": cpu_ms,
-            "lidarjax_nodes_fixed_ms": 1e3 * t_fixed,
-            "numpy_ms": 1e3 * t_np,
-            "ratio": t_np / t_jax, "max_abs_diff": diff, "target_ms": 20.0}
+            "lidarjax_nodes_fixed_ms": 1e3 * t_fixed, "lidarjax_own_nodes_ms": 1e3 * t_own,
+            "numpy_ms": np_ms["per_gate"], "numpy_shared_ms": np_ms["shared"],
+            "ratio": min(np_ms.values()) / (1e3 * t_jax), "max_abs_diff": diff, "target_ms": 20.0}
 
 
 def series_case(kind, repeats, shape=(512, 32, 64), spacing=(4.0, 8.0, 4.0)):
@@ -197,23 +219,32 @@ def series_case(kind, repeats, shape=(512, 32, 64), spacing=(4.0, 8.0, 4.0)):
     compile_s = time.perf_counter() - t0
     t_jax = median_time(lambda: lj.simulate_scan_series(field, pattern, mount, n_scans=n_scans,
                                                         probe=probe).los.block_until_ready(), repeats)
-    chosen = _refine(field, pattern, probe, "benchmark")
-    offsets, weights = chosen._host_nodes(np.asarray(pattern.ranges))
+    chosen, rule = _refine(field, pattern, probe, "benchmark")
+    t_own = median_time(lambda: lj.simulate_scan_series(field, pattern, mount, n_scans=n_scans, probe=probe,
+                                                        shared_nodes=False).los.block_until_ready(), repeats)
+    ranges = np.asarray(pattern.ranges, np.float64)
+    offsets, weights = lj.gate_nodes(field, pattern, probe)
     rays = pattern.repeated(n_scans)
     args = (np.asarray(field.mean.sample(np.zeros(3))), np.asarray(box.velocity), np.asarray(box.spacing),
             np.asarray(field.axes()), np.asarray(field.anchor), float(field.shift), 10.0,
             np.array([0.0, 0.0, 20.0]), np.asarray(rays.azimuth), np.asarray(rays.elevation),
-            np.asarray(rays.ray_times()), np.asarray(pattern.ranges), offsets, weights)
-    ref = np_series(*args)
-    t_np = median_time(lambda: np_series(*args), 1, warm=False)
-    rgi = RgiBox(np.asarray(box.velocity), np.asarray(box.spacing))
-    ref_rgi = np_series(*args, fluct=rgi)
-    t_rgi = median_time(lambda: np_series(*args, fluct=rgi), 1, warm=False)
+            np.asarray(rays.ray_times()))
     got = np.asarray(res.los).reshape(-1, 200)
-    diff = float(max(np.nanmax(np.abs(got - ref)), np.nanmax(np.abs(got - ref_rgi))))
+    out, diff = {}, 0.0
+    rgi = RgiBox(np.asarray(box.velocity), np.asarray(box.spacing))
+    for name, (fine, window) in layouts(ranges, offsets, weights).items():
+        for base, fluct in (("numpy", np_box_fluct), ("scipy_rgi", rgi)):
+            ref = np_series(*args, fine, window, weights, fluct=fluct)
+            diff = max(diff, float(np.nanmax(np.abs(got - ref))))
+            key = f"{base}_s" if name == "per_gate" else f"{base}_shared_s"
+            out[key] = median_time(
+                lambda f=fine, w=window, fl=fluct: np_series(*args, f, w, weights, fluct=fl), 1, warm=False)
+    best_np = min(out["numpy_s"], out["numpy_shared_s"])
+    best_rgi = min(out["scipy_rgi_s"], out["scipy_rgi_shared_s"])
     return {"case": kind, "rays": rays.n_rays, "gates": 200, "box": list(shape), "box_spacing": list(spacing),
-            "probe_nodes": chosen.n_nodes, "compile_s": compile_s, "lidarjax_s": t_jax,
-            "numpy_s": t_np, "ratio": t_np / t_jax, "scipy_rgi_s": t_rgi, "ratio_rgi": t_rgi / t_jax,
+            "probe_nodes": chosen.n_nodes, "nodes_per_gate": offsets.shape[1], "shared_rule": rule,
+            "compile_s": compile_s, "lidarjax_s": t_jax, "lidarjax_own_nodes_s": t_own, **out,
+            "ratio": best_np / t_jax, "ratio_rgi": best_rgi / t_jax,
             "max_abs_diff": diff, "target_ratio": 50.0}
 
 
@@ -233,13 +264,16 @@ def main():
     print(machine_line(out["machine"]), "load", out["load_average"])
     for c in out["ppi"]:
         print(f"PPI {c['dtype']}: {c['lidarjax_ms']:.2f} ms wall ({c['lidarjax_nodes_fixed_ms']:.2f} ms with "
-              f"the nodes chosen once), {c['lidarjax_cpu_ms']:.1f} ms CPU "
-              f"(numpy {c['numpy_ms']:.0f} ms, "
-              f"{c['ratio']:.0f}x; {c['probe_nodes']} nodes; diff {c['max_abs_diff']:.1e})")
+              f"the nodes chosen once, {c['lidarjax_own_nodes_ms']:.2f} ms with per-gate nodes), "
+              f"{c['lidarjax_cpu_ms']:.1f} ms CPU (numpy {c['numpy_ms']:.0f} ms, shared "
+              f"{c['numpy_shared_ms']:.0f} ms: "
+              f"{c['ratio']:.0f}x; {c['nodes_per_gate']} nodes per gate, rule {c['shared_rule']}; "
+              f"diff {c['max_abs_diff']:.1e})")
     for c in out["series"]:
-        print(f"series {c['case']}: {c['lidarjax_s'] * 1e3:.0f} ms vs numpy {c['numpy_s']:.2f} s "
-              f"({c['ratio']:.0f}x), scipy RGI {c['scipy_rgi_s']:.2f} s ({c['ratio_rgi']:.0f}x); "
-              f"diff {c['max_abs_diff']:.1e}")
+        print(f"series {c['case']}: {c['lidarjax_s'] * 1e3:.0f} ms (per-gate nodes "
+              f"{c['lidarjax_own_nodes_s'] * 1e3:.0f} ms) vs numpy {c['numpy_s']:.2f} s / shared "
+              f"{c['numpy_shared_s']:.2f} s ({c['ratio']:.0f}x), scipy RGI {c['scipy_rgi_s']:.2f} s / shared "
+              f"{c['scipy_rgi_shared_s']:.2f} s ({c['ratio_rgi']:.0f}x); diff {c['max_abs_diff']:.1e}")
     plot(out, args.out / f"{args.name}.png")
 
 

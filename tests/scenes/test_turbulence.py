@@ -292,3 +292,25 @@ def test_time_sampler_lines_built_in_chunks(monkeypatch):
                                               jnp.broadcast_to(ts, (3, 3, 5))), atol=1e-12)
     g = jax.grad(lambda s: jnp.sum(f.time_sampler(pts * s, dirn, n_times=1000)(ts)))(1.0)
     assert np.isfinite(float(g))
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_los_projected_at_the_corners_equals_the_projected_velocity(periodic):
+    """`FrozenTurbulence.los_local_at` (the box projected at its cells' corners) equals the
+    interpolated velocity projected on the direction, NaN at the same points (a
+    non-periodic box's sides), for per-point directions and broadcast times."""
+    box, _ = mode_box(periodic=periodic)
+    mean = lidarjax.GridField(np.linspace(-200, 200, 9), np.linspace(-200, 200, 9), np.linspace(0, 80, 5),
+                              np.random.default_rng(1).normal(size=(9, 9, 5, 3)) + 6.0)
+    # field-local points: the mean grid's first node is the origin
+    f = FrozenTurbulence(mean, box, 9.0, 250.0, anchor=(203.0, 198.0, 0.0))
+    rng = np.random.default_rng(4)
+    pts = jnp.asarray(rng.uniform([50, 150, 2], [350, 250, 38], size=(7, 11, 3)))
+    dirs = rng.normal(size=(7, 11, 3))
+    dirs = jnp.asarray(dirs / np.linalg.norm(dirs, axis=-1, keepdims=True))
+    t = jnp.asarray(rng.uniform(0, 3600, size=(5, 7, 1)))
+    got = np.asarray(f.los_local_at(pts, dirs, t))
+    want = np.sum(np.asarray(f.sample_local_at(pts, t)) * np.asarray(dirs), axis=-1)
+    assert got.shape == (5, 7, 11)
+    assert np.array_equal(np.isnan(got), np.isnan(want)) and 0.5 < np.isfinite(want).mean() <= 1
+    np.testing.assert_allclose(got, want, atol=1e-12, equal_nan=True)
