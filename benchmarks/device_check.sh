@@ -2,7 +2,8 @@
 # The GPU check, as run through the project's lent device (see README "GPU"): the numerics
 # tests on the accelerator, then the scanning benchmark there. Wheels the device image lacks
 # (h5netcdf, foamlib, meshio: pure Python) travel in .whl/ (ignored by git).
-#   OUT=folder SUITE_S=seconds TESTS="files..." BENCH=0|1 bash benchmarks/device_check.sh
+#   OUT=folder SUITE_S=seconds TESTS="files..." WORKERS=n BENCH=0|1 BENCH_ARGS=" " (full run)
+#   bash benchmarks/device_check.sh
 set -u
 OUT=${OUT:-/tmp/device_out}; mkdir -p "$OUT"
 export XLA_PYTHON_CLIENT_PREALLOCATE=false PYTHONUNBUFFERED=1
@@ -14,7 +15,7 @@ fi
 nvidia-smi -L 2>/dev/null
 python3 -c "import jax, numpy; print('jax', jax.__version__, 'numpy', numpy.__version__, jax.devices())"
 if [ "${BENCH:-1}" = 1 ]; then
-  timeout "${BENCH_S:-200}" python3 benchmarks/scanning.py --quick --out "$OUT" --name scanning_device
+  timeout "${BENCH_S:-200}" python3 benchmarks/scanning.py ${BENCH_ARGS:---quick} --out "$OUT" --name scanning_device
   echo "benchmark rc $?"
 fi
 TESTS=${TESTS:-"tests/core tests/scenes tests/io/test_openfoam_exact.py tests/io/test_snapshots.py tests/io/test_vtk.py tests/io/test_turbulence.py tests/io/test_tables.py tests/io/test_hpl.py"}
