@@ -40,6 +40,26 @@ def windcube_file(name: str) -> Path:
     return folder / name
 
 
+#: Real scanning-lidar files the project commits (obtained from a package registry with
+#: their licence): tests/data/scanning/.
+SCANNING = DATA / "scanning"
+
+
+def scanning_file(name: str) -> Path:
+    """A real scanning-lidar file: committed in `SCANNING`, else (cuts of public repositories
+    that this project may not commit, see tests/data/scanning/README.md) from
+    `LIDARJAX_SCANNING_DATA` or ``../shared/data/scanning/``; skip the test naming it when
+    absent."""
+    if (SCANNING / name).is_file():
+        return SCANNING / name
+    places = [Path(os.environ["LIDARJAX_SCANNING_DATA"])] if os.environ.get("LIDARJAX_SCANNING_DATA") else []
+    places += [base / "shared" / "data" / "scanning" for base in (REPO.parent, REPO.parent.parent)]
+    for folder in places:
+        if (folder / name).is_file():
+            return folder / name
+    pytest.skip(f"real scanning-lidar file not available ({name}: tests/data/scanning/README.md)")
+
+
 def tree_allclose(a, b, rtol=RTOL64, atol=ATOL64) -> bool:
     """True when two pytrees have the same structure and all leaves are close (NaN == NaN)."""
     la, ta = jax.tree_util.tree_flatten(a)

@@ -28,11 +28,11 @@ def test_ppi_preset_written_and_equal_to_the_api(tmp_path, capsys):
 
 
 def test_scan_file_layout_series_and_rhi_plot(tmp_path):
-    out = tmp_path / "vad.nc"
-    hpl = DATA / "scanning" / "VAD_194_20210624_170110_cut.hpl"
+    out = tmp_path / "rhi_file.nc"
+    hpl = DATA / "scanning" / "RHI_77_20260921_000812.hpl"  # the committed real Halo RHI
     assert main(["scan", str(hpl), "--scans", "2", "--out", str(out)]) == 0
     back = read_scan_netcdf(out)
-    assert back["radial_velocity"].shape == (2, 2, 40)
+    assert back["radial_velocity"].shape == (2, 4, 20)
     np.testing.assert_allclose(back["range"], lj.io.read_hpl(hpl).ranges)
     png = tmp_path / "rhi.png"
     assert main(["scan", "rhi", "--azimuth", "30", "--n-rays", "6", "--gates", "5",

@@ -20,7 +20,7 @@ from ..helpers import DATA
 
 pytest.importorskip("xarray")
 
-HPL = DATA / "scanning" / "VAD_194_20210624_170110_cut.hpl"
+HPL = DATA / "scanning" / "RHI_77_20260921_000812.hpl"  # the committed real Halo RHI
 WIND = np.array([3.0, -4.0, 0.5])  # uniform CFD wind, m/s
 LOCATIONS = {0.0: [0.0, 0.0, 0.0], 30.0: [100.0, 50.0, 10.0]}
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -40,11 +40,11 @@ def test_series_of_the_halo_file_layout(series_case, capsys):
                  "--no-plots", "--out", str(out)]) == 0
     back = read_scan_netcdf(out / "series_scan.nc")
     pattern = lj.io.read_hpl(HPL).pattern()
-    assert back["radial_velocity"].shape == (2, 2, 40)
+    assert back["radial_velocity"].shape == (2, 4, 20)
     times = np.asarray(pattern.ray_times())[None] + float(pattern.period) * np.arange(2)[:, None]
     np.testing.assert_allclose(back["ray_time"], times, atol=1e-9)
     assert np.isfinite(back["radial_velocity"]).all()
-    assert "no VAD profile: the scan has 2 rays" in capsys.readouterr().out
+    assert "series_vad.csv" not in capsys.readouterr().out  # an RHI: no VAD profile
     assert not (out / "series_vad.csv").exists()
 
 
@@ -100,11 +100,11 @@ def test_simulate_ppi_is_u_dot_n_per_beta_with_plots(ppi_run, capsys):
 
 def test_simulate_hpl_layout_and_tilted_mount(case, tmp_path, capsys):
     root, settings = case
-    out = tmp_path / "vad"
+    out = tmp_path / "rhi"
     assert main(["simulate", str(settings), "--field", str(root / "run_0.npz"), "--beta", "0",
                  "--scan", str(HPL), "--probe", "pulsed", "--out", str(out)]) == 0
     line = capsys.readouterr().out
-    assert "2 rays x 40 gates (vad)" in line and "0.0% NaN" in line
+    assert "4 rays x 20 gates (rhi)" in line and "0.0% NaN" in line
     back = read_scan_netcdf(out / "scan_0.nc")
     halo = lj.io.read_hpl(HPL)
     pattern = halo.pattern()

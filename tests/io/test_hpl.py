@@ -1,9 +1,12 @@
-"""Halo StreamLine `.hpl` files: the committed real cuts (tests/data/scanning/README.md: a
-stare, a VAD and an RHI with overlapping gates), checked against a plain independent parse,
+"""Halo StreamLine `.hpl` files (tests/data/scanning/README.md): the committed real RHI with
+overlapping gates, and a real stare and VAD where available (`scanning_file`: cuts of public
+repositories kept outside the project), checked against a plain independent parse,
 simulated in the same layout, and malformed variants refused in one line naming the file
 and line."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,11 +14,11 @@ import pytest
 import lidarjax as lj
 from lidarjax.io import read_hpl
 
-from ..helpers import DATA
+from ..helpers import SCANNING, scanning_file
 
-STARE = DATA / "scanning" / "Stare_91_20221214_12.hpl"
-VAD = DATA / "scanning" / "VAD_194_20210624_170110_cut.hpl"
-RHI = DATA / "scanning" / "RHI_77_20260921_000812.hpl"
+STARE = "Stare_91_20221214_12.hpl"
+VAD = "VAD_194_20210624_170110_cut.hpl"
+RHI = SCANNING / "RHI_77_20260921_000812.hpl"
 
 
 def _plain(path):
@@ -33,6 +36,7 @@ def _plain(path):
     (RHI, 9.0, 3.0),  # 18 m / 2 + gate x 3 m: overlapping gates, one 3 m sampling point apart
 ])
 def test_real_files_match_an_independent_parse(path, first, spacing):
+    path = path if isinstance(path, Path) else scanning_file(path)
     scan = read_hpl(path)
     body, rays = _plain(path)
     assert scan.n_rays == len(rays)
@@ -49,11 +53,11 @@ def test_real_files_match_an_independent_parse(path, first, spacing):
 
 
 def test_header_fields_and_threshold():
-    s = read_hpl(STARE)
+    s = read_hpl(scanning_file(STARE))
     assert (s.n_gates, s.gate_length, s.scan_type, s.system_id) == (250, 48.0, "Stare", "91")
     assert s.start_time == np.datetime64("2022-12-14T12:00:20.64")
     assert s.spectral_width is None
-    v = read_hpl(VAD)
+    v = read_hpl(scanning_file(VAD))
     assert v.scan_type == "VAD" and v.spectral_width is not None and v.n_gates == 40
     # the ray time is hours after midnight of the start date
     np.testing.assert_allclose((v.time[0] - np.datetime64("2021-06-24")) / np.timedelta64(1, "s"),
@@ -69,7 +73,7 @@ def test_simulated_scan_in_the_real_layout():
     """The VAD file's layout (its rays, gates and times) simulated in a uniform wind: same
     ranges and times, and the LOS of a level instrument are n . V with the file's angles
     (the file's pitch and roll given to the mount tilt the rays, as the instrument is)."""
-    v = read_hpl(VAD)
+    v = read_hpl(scanning_file(VAD))
     p = v.pattern()
     wind = lj.scenes.uniform(9.0, 230.0, w=0.2)
     res = lj.simulate_scan(wind, p, lj.Mount([0.0, 0.0, 0.0]), probe=lj.instrument_probe())
@@ -137,16 +141,16 @@ def _corrupt(tmp_path, path, fn):
 
 @pytest.mark.parametrize("edit, where", [
     (lambda ls: [ls[0]] + ls[2:3] + ls[4:], None),  # header field missing (gate length)
-    (lambda ls: [x.replace("Number of gates:\t40", "Number of gates:\tforty") for x in ls], 3),
-    (lambda ls: ls[:18] + ["  0 -0.5351 1.2x8768  1.344642E-5 0.0764"] + ls[19:], 19),
+    (lambda ls: [x.replace("Number of gates:\t20", "Number of gates:\ttwenty") for x in ls], 3),
+    (lambda ls: ls[:18] + ["  0 0.4969 0.9x3586 -9.242015E-7"] + ls[19:], 19),
     (lambda ls: ls[:19] + ls[20:], 20),  # gate 1 missing: gate 2 found where 1 expected
-    (lambda ls: ls[:17] + ["17.0207 360.00 75.00"] + ls[18:], 18),
+    (lambda ls: ls[:17] + ["0.13843889 255.00  -0.00"] + ls[18:], 18),
     (lambda ls: ls[:-5], None),  # last ray cut short
-    (lambda ls: [x.replace("No. of rays in file:\t2", "No. of rays in file:\t6") for x in ls], None),
+    (lambda ls: [x.replace("No. of rays in file:\t4", "No. of rays in file:\t6") for x in ls], None),
     (lambda ls: [x for x in ls if not x.startswith("****")], None),
 ])
 def test_malformed_files_refused_in_one_line(tmp_path, edit, where):
-    bad = _corrupt(tmp_path, VAD, edit)
+    bad = _corrupt(tmp_path, RHI, edit)
     with pytest.raises(ValueError) as err:
         read_hpl(bad)
     msg = str(err.value)

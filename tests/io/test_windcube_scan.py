@@ -1,4 +1,5 @@
-"""Windcube 200S scanning NetCDF (the committed real cut) and the CF NetCDF writer of scans:
+"""Windcube 200S scanning NetCDF (a real cut, where available: `scanning_file`,
+tests/data/scanning/README.md) and the CF NetCDF writer of scans:
 the reader against h5py, the real DBS reconstructed by `vad_fit` and simulated in its own
 layout, the file's own wind product explained (its processing took the east ray for the
 vertical one), and a simulated series written and read back."""
@@ -11,21 +12,26 @@ import pytest
 import lidarjax as lj
 from lidarjax.io import read_scan_netcdf, read_windcube_scan, write_scan_netcdf
 
-from ..helpers import DATA
+from ..helpers import scanning_file
 
 h5py = pytest.importorskip("h5py")
 pytest.importorskip("xarray")
 
-DBS = DATA / "scanning" / "WLS200S-218_2021-07-01_13-03-28_dbs_452_100m_cut.nc"
+DBS_NAME = "WLS200S-218_2021-07-01_13-03-28_dbs_452_100m_cut.nc"
 
 
 @pytest.fixture(scope="module")
-def dbs():
-    return read_windcube_scan(DBS)
+def dbs_path():
+    return scanning_file(DBS_NAME)
 
 
-def test_reader_matches_h5py(dbs):
-    with h5py.File(DBS, "r") as f:
+@pytest.fixture(scope="module")
+def dbs(dbs_path):
+    return read_windcube_scan(dbs_path)
+
+
+def test_reader_matches_h5py(dbs, dbs_path):
+    with h5py.File(dbs_path, "r") as f:
         g = f["Sweep_748901"]
         np.testing.assert_array_equal(dbs.radial_wind_speed, g["radial_wind_speed"][()])
         np.testing.assert_array_equal(dbs.azimuth, g["azimuth"][()])
@@ -38,7 +44,7 @@ def test_reader_matches_h5py(dbs):
     np.testing.assert_allclose(dbs.seconds(), secs - secs[0], atol=1e-6)
     assert (dbs.sweep_mode, dbs.gate_length, dbs.accumulation) == ("dbs", 100.0, 2.0)
     assert dbs.instrument == "WLS200S-218"
-    with h5py.File(DBS, "r") as f:
+    with h5py.File(dbs_path, "r") as f:
         g = f["Sweep_748901"]
         np.testing.assert_array_equal(dbs.measurement_height, g["measurement_height"][()])
         np.testing.assert_array_equal(dbs.horizontal_wind_speed, g["horizontal_wind_speed"][()])
