@@ -155,28 +155,7 @@ class TurbulenceBox(eqx.Module):
 
         Periodic along ``x`` (and along ``y``/``z`` where `periodic`); NaN outside a
         non-periodic axis' nodes, inserted last over a safe stand-in (finite gradients)."""
-        dtype = self.dtype
-        nx, ny, nz = self.shape
-        s = self.spacing
-        ix0, ix1, fx, okx = box_axis(xi.astype(dtype) / s[0], nx, True)
-        iy0, iy1, fy, oky = box_axis(eta.astype(dtype) / s[1] + (ny - 1) / 2, ny, self.periodic[0])
-        iz0, iz1, fz, okz = box_axis(zeta.astype(dtype) / s[2], nz, self.periodic[1])
-        flat = self.velocity.reshape(-1, 3)
-
-        def corner(i, j, k):
-            return flat[(i * ny + j) * nz + k]
-
-        fx, fy, fz = fx[..., None], fy[..., None], fz[..., None]
-        c00 = corner(ix0, iy0, iz0) * (1 - fz) + corner(ix0, iy0, iz1) * fz
-        c01 = corner(ix0, iy1, iz0) * (1 - fz) + corner(ix0, iy1, iz1) * fz
-        c10 = corner(ix1, iy0, iz0) * (1 - fz) + corner(ix1, iy0, iz1) * fz
-        c11 = corner(ix1, iy1, iz0) * (1 - fz) + corner(ix1, iy1, iz1) * fz
-        c0 = c00 * (1 - fy) + c01 * fy
-        c1 = c10 * (1 - fy) + c11 * fy
-        val = c0 * (1 - fx) + c1 * fx
-        ok = okx & oky & okz
-        return jnp.where(ok[..., None], val, jnp.nan)
-
+        return self._trilinear(xi, eta, zeta, lambda v: v, vector=True)
 
     def los_box(
         self, xi: Float[Array, ...], eta: Float[Array, ...], zeta: Float[Array, ...],
@@ -186,6 +165,14 @@ class TurbulenceBox(eqx.Module):
         the projection done at the cell's corners: one number flows through the lerps, so the
         compiler keeps the eight gathers in one loop (projecting the interpolated vector reads
         it per component, and the gathers are repeated for each). NaN as in `sample_box`."""
+        d = jnp.asarray(direction).astype(self.dtype)
+        dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
+        return self._trilinear(xi, eta, zeta,
+                               lambda v: v[..., 0] * dx + v[..., 1] * dy + v[..., 2] * dz, vector=False)
+
+    def _trilinear(self, xi, eta, zeta, value, *, vector: bool):
+        """Trilinear interpolation of ``value(row)`` over the cell's eight ``(u, v, w)`` rows
+        (``(..., 3)`` from `value` when `vector`, else a number), NaN outside."""
         dtype = self.dtype
         nx, ny, nz = self.shape
         s = self.spacing
@@ -193,22 +180,21 @@ class TurbulenceBox(eqx.Module):
         iy0, iy1, fy, oky = box_axis(eta.astype(dtype) / s[1] + (ny - 1) / 2, ny, self.periodic[0])
         iz0, iz1, fz, okz = box_axis(zeta.astype(dtype) / s[2], nz, self.periodic[1])
         flat = self.velocity.reshape(-1, 3)
-        d = jnp.asarray(direction).astype(dtype)
-        dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
 
         def corner(i, j, k):
-            # indices are reduced into the box above: no bounds handling in the gather
-            v = flat.at[(i * ny + j) * nz + k].get(mode="promise_in_bounds")
-            return v[..., 0] * dx + v[..., 1] * dy + v[..., 2] * dz
+            # indices are reduced into the box by `box_axis`: no bounds handling in the gather
+            return value(flat.at[(i * ny + j) * nz + k].get(mode="promise_in_bounds"))
 
+        ok = okx & oky & okz
+        if vector:
+            fx, fy, fz, ok = fx[..., None], fy[..., None], fz[..., None], ok[..., None]
         c00 = corner(ix0, iy0, iz0) * (1 - fz) + corner(ix0, iy0, iz1) * fz
         c01 = corner(ix0, iy1, iz0) * (1 - fz) + corner(ix0, iy1, iz1) * fz
         c10 = corner(ix1, iy0, iz0) * (1 - fz) + corner(ix1, iy0, iz1) * fz
         c11 = corner(ix1, iy1, iz0) * (1 - fz) + corner(ix1, iy1, iz1) * fz
         c0 = c00 * (1 - fy) + c01 * fy
         c1 = c10 * (1 - fy) + c11 * fy
-        val = c0 * (1 - fx) + c1 * fx
-        return jnp.where(okx & oky & okz, val, jnp.nan)
+        return jnp.where(ok, c0 * (1 - fx) + c1 * fx, jnp.nan)
 
 
 def box_axis(s, n: int, periodic: bool):

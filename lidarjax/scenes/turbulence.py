@@ -215,6 +215,12 @@ class FrozenTurbulence(AbstractField):
 
     def fluctuation_at(self, points: Float[Array, "... 3"], time) -> Float[Array, "... 3"]:
         """The box's fluctuation (m/s, CFD frame) at field-local points and times (s)."""
+        axes, shape, coords = self._box_coordinates(points, time)
+        return rotate(axes.T, self.box.sample_box(*coords))
+
+    def _box_coordinates(self, points, time):
+        """The box axes (rows, CFD frame), the broadcast shape of points and times, and the
+        box coordinates ``(xi, eta, zeta)`` (m) of field-local `points` at `time` (s)."""
         dtype = self.dtype
         points = jnp.asarray(points).astype(dtype)
         time = jnp.asarray(time)
@@ -222,17 +228,11 @@ class FrozenTurbulence(AbstractField):
             time = time.astype(dtype)
         time = time.astype(dtype)
         axes = self.axes()
-        d = points - self.anchor
-        local = rotate(axes, d)
+        local = rotate(axes, points - self.anchor)
         travelled = advected_distance(self.speed, time, self.box.length)
         shape = jnp.broadcast_shapes(local.shape[:-1], travelled.shape)
         xi = (local[..., 0] - self.shift) - travelled
-        uvw = self.box.sample_box(
-            jnp.broadcast_to(xi, shape),
-            jnp.broadcast_to(local[..., 1], shape),
-            jnp.broadcast_to(local[..., 2], shape),
-        )
-        return rotate(axes.T, uvw)
+        return axes, shape, tuple(jnp.broadcast_to(c, shape) for c in (xi, local[..., 1], local[..., 2]))
 
     def sample_local_at(self, points, time):
         """Velocity (m/s, CFD frame) at field-local points (m) and times (s, broadcastable to
@@ -245,22 +245,10 @@ class FrozenTurbulence(AbstractField):
         the box's, projected at the box cell's corners on the direction in box axes (the
         same number to rounding; one gather loop instead of one per component). NaN where
         either is NaN."""
-        dtype = self.dtype
-        points = jnp.asarray(points).astype(dtype)
-        directions = jnp.broadcast_to(jnp.asarray(directions).astype(dtype), points.shape)
-        time = jnp.asarray(time)
-        time = (time if jnp.issubdtype(time.dtype, jnp.floating) else time.astype(dtype)).astype(dtype)
-        axes = self.axes()
-        local = rotate(axes, points - self.anchor)
-        travelled = advected_distance(self.speed, time, self.box.length)
-        shape = jnp.broadcast_shapes(local.shape[:-1], travelled.shape)
-        xi = (local[..., 0] - self.shift) - travelled
-        fluct = self.box.los_box(
-            jnp.broadcast_to(xi, shape),
-            jnp.broadcast_to(local[..., 1], shape),
-            jnp.broadcast_to(local[..., 2], shape),
-            jnp.broadcast_to(rotate(axes, directions), shape + (3,)),
-        )
+        points = jnp.asarray(points).astype(self.dtype)
+        directions = jnp.broadcast_to(jnp.asarray(directions).astype(self.dtype), points.shape)
+        axes, shape, coords = self._box_coordinates(points, time)
+        fluct = self.box.los_box(*coords, jnp.broadcast_to(rotate(axes, directions), shape + (3,)))
         return self.mean.los_local_at(points, directions, time) + fluct
 
     def sample_local(self, points):
