@@ -169,7 +169,10 @@ class ArrayMemo:
         value = compute()
         drop = lambda _ref, k=key: self._entries.pop(k, None)  # noqa: E731
         refs = tuple(weakref.ref(a, drop) for a in leaves)
-        if len(self._entries) >= self._size:
-            self._entries.pop(next(iter(self._entries)))
+        while len(self._entries) >= self._size:
+            try:  # a weak reference's callback may drop entries meanwhile
+                self._entries.pop(next(iter(self._entries)), None)
+            except (RuntimeError, StopIteration):
+                break
         self._entries[key] = (refs, value)
         return value
