@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The GPU check, as run through the project's lent device (see README "GPU"): the numerics
+# The GPU check, as run through the project's lent device (README "On a GPU"): the numerics
 # tests on the accelerator, then the scanning benchmark there. Wheels the device image lacks
 # (h5netcdf, foamlib, meshio: pure Python) travel in .whl/ (ignored by git).
 #   OUT=folder SUITE_S=seconds TESTS="files..." WORKERS=n BENCH=0|1 BENCH_ARGS=" " (full run)
