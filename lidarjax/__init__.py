@@ -127,6 +127,7 @@ from .scanning import gate_ranges as gate_ranges
 from .scanning import instrument_probe as instrument_probe
 from .scanning import ppi as ppi
 from .scanning import rhi as rhi
+from .scanning import scan_points as scan_points
 from .scanning import simulate_dual_doppler as simulate_dual_doppler
 from .scanning import simulate_scan as simulate_scan
 from .scanning import simulate_scan_series as simulate_scan_series

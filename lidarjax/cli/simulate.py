@@ -23,7 +23,7 @@ from ..forward import probe_for_field
 from ..io import read_settings, simulate_points, write_scan_netcdf
 from ..io.fields import check_field_file, load_field
 from ..probe import PulsedProbe
-from ..scanning import simulate_scan
+from ..scanning import scan_points, simulate_scan
 from ..workflows.seed_results import explain_nans, seed_result_files, write_seed_results
 from ..workflows.seed_tables import settings_mount, simulate_settings, table_region
 from ._common import (
@@ -162,7 +162,10 @@ def run_scanning(args, settings, betas, paths) -> int:
     out.mkdir(parents=True, exist_ok=True)
     for k, b in enumerate(betas):
         mount = mounts[k]
-        field = load_field(paths[b], region=scan_region(pattern, mount, probe))
+        # an OpenFOAM or VTK mesh: resampled over the scan's region and made exact (its own
+        # cellPoint) at every node the scan samples, chosen for the grid's resolution
+        field = load_field(paths[b], region=scan_region(pattern, mount, probe),
+                           exact_at=lambda grid, m=mount: scan_points(grid, pattern, m, probe))
         res = simulate_scan(field, pattern, mount, probe=probe)
         nc = out / f"{names[b]}.nc"
         write_scan_netcdf(nc, res.los, azimuth=res.azimuth, elevation=res.elevation,

@@ -40,7 +40,7 @@ from ..probe import (
 )
 from .pattern import ScanPattern
 
-__all__ = ["ScanResult", "gate_nodes", "simulate_scan", "simulate_scan_series"]
+__all__ = ["ScanResult", "gate_nodes", "scan_points", "simulate_scan", "simulate_scan_series"]
 
 
 class ScanResult(eqx.Module):
@@ -138,6 +138,33 @@ def gate_nodes(field: AbstractField, pattern: ScanPattern, probe: AbstractProbe,
         return np.zeros((ranges.size, 1)), np.ones((ranges.size, 1))
     probe, rule = _refine(field, pattern, probe, "gate_nodes", shared_nodes)
     return _host_gate_nodes(probe, ranges, rule)
+
+
+def scan_points(field: AbstractField, pattern: ScanPattern, mount: Mount,
+                probe: AbstractProbe | None = None, *, shared_nodes: bool = True) -> np.ndarray:
+    """Every point `simulate_scan` samples for `pattern` from one `mount` in `field`, absolute
+    CFD metres ``(n, 3)`` (float64, host): each sub-ray's nodes of every gate as `gate_nodes`
+    lays them out (those the cut at the lidar drops included: they are sampled, then given
+    no weight), and every gate centre. Prepare a mesh's exact interpolation at them
+    (`lidarjax.io.load_field(..., exact_at=lambda grid: scan_points(grid, ...))`): the nodes
+    depend on the field's resolution, so pass the field that will be simulated, or its grid.
+    """
+    probe = PointProbe() if probe is None else probe
+    _validate("scan_points", field, pattern, mount, probe)
+    if mount.batch_shape:
+        raise ValueError("scan_points: needs one lidarjax.Mount, not a batch; call it per mount.")
+    ranges = np.asarray(pattern.ranges, np.float64)
+    if isinstance(probe, PointProbe):
+        node_r = ranges[:, None]
+    else:
+        chosen, rule = _refine(field, pattern, probe, "scan_points", shared_nodes)
+        offsets = (_host_gate_nodes(chosen, ranges, rule)[0] if rule is not None
+                   else chosen._host_nodes(ranges)[0])
+        node_r = np.concatenate([ranges[:, None] + offsets, ranges[:, None]], axis=1)
+    rot = np.asarray(body_to_cfd_rotation(mount), np.float64)
+    n = np.asarray(pattern.sub_directions(), np.float64).reshape(-1, 3) @ rot.T  # (B, 3)
+    loc = np.asarray(mount.location, np.float64) + np.asarray(mount.location_lo, np.float64)
+    return (loc + np.unique(node_r)[:, None, None] * n[None]).reshape(-1, 3)
 
 
 def simulate_scan(field: AbstractField, pattern: ScanPattern, mount: Mount, *,

@@ -249,3 +249,35 @@ def test_refuses_bad_input(small):
         CellPointField(object(), pts, np.zeros((len(pts), 4, 3)), np.zeros((len(pts), 4, 3)))
     with pytest.raises(ValueError, match="vertices"):
         CellPointField(grid, pts, np.zeros((1, 4, 3)), np.zeros((len(pts), 4, 3)))
+
+
+def test_scanning_lidar_exact_at_its_nodes(small):
+    """A PPI from the roof with a pulsed probe per gate (shared nodes): prepared at
+    `lidarjax.scan_points`, every gate is the `gate_nodes`-weighted mean of OpenFOAM's
+    cellPoint at its nodes (numpy, `sample_openfoam`), to 1e-10; the graded grid alone is
+    off by more than 1e-3 m/s."""
+    of, _grid, _pts, _scan, _probe, mount, _h = small
+    pattern = lj.ppi(40.0, lj.gate_ranges(6, 3.0, first=6.0), n_rays=8, accumulation=0.5)
+    probe = lj.PulsedProbe(4.0, 3.0)
+    pts_box = lj.scan_points(lj.scenes.uniform(1.0, 0.0), pattern, mount, probe.with_nodes(9))
+    axes, vel, _ = resample_openfoam(of, (pts_box.min(0) - 10.0, pts_box.max(0) + 10.0), check_points=0)
+    grid = lj.GridField(*axes, vel)
+    pts = lj.scan_points(grid, pattern, mount, probe)
+    f = cellpoint_field(of, grid, pts)
+    res = lj.simulate_scan(f, pattern, mount, probe=probe)
+    offsets, weights = lj.gate_nodes(f, pattern, probe)
+    assert offsets.shape != lj.gate_nodes(f, pattern, probe, shared_nodes=False)[0].shape  # shared
+    n = np.asarray(res.directions)
+    node_r = np.asarray(pattern.ranges)[:, None] + offsets  # (g, q)
+    nodes = np.asarray(mount.location)[None, None, None] + node_r[None, :, :, None] * n[:, None, None, :]
+    v = sample_openfoam(of, nodes.reshape(-1, 3)).reshape(nodes.shape)
+    los_q = np.einsum("rgqi,ri->rgq", v, n)
+    kept = weights > 0
+    bad = np.any(np.isnan(los_q) & kept[None], axis=-1)
+    expect = np.where(bad, np.nan, np.sum(np.where(kept[None], weights[None] * np.nan_to_num(los_q), 0), -1))
+    got = np.asarray(res.los)
+    assert np.isfinite(expect).sum() > 30
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(expect))
+    np.testing.assert_allclose(got, expect, rtol=0, atol=1e-10)
+    graded = np.asarray(lj.simulate_scan(grid, pattern, mount, probe=probe).los)
+    assert np.nanmax(np.abs(graded - expect)) > 1e-3
