@@ -230,6 +230,12 @@ def _reference_nodes(cls: str, n_nodes, dtype) -> jax.Array:
     return jnp.asarray(_midpoints(n), dtype)
 
 
+def _pulsed_weight(erf, offset, rp, dp):
+    """The pulsed weighting ``phi(offset)`` (1 / length) for ``rp`` and gate length ``dp``
+    (`erf` of jax or scipy: traced or host)."""
+    return (erf((offset + dp / 2) / rp) - erf((offset - dp / 2) / rp)) / (2 * dp)
+
+
 def _pulsed_rule(xp, erf, support, r, rp, dp, x):
     """Midpoint rule of the pulsed weighting over the support cut at the lidar, ``|o| <
     h = min(support, r)`` for focus ranges `r` ``(...)``: offsets ``h * x`` ``(..., n)``
@@ -360,9 +366,17 @@ class PulsedProbe(AbstractProbe):
         """``phi(offset)`` (1 / length); independent of the focus range."""
         offset = jnp.asarray(offset)
         dtype = _float_dtype(offset)
-        rp, dp = self._rp(dtype), self.gate_length.astype(dtype)
-        erf = jax.scipy.special.erf
-        return (erf((offset + dp / 2) / rp) - erf((offset - dp / 2) / rp)) / (2 * dp)
+        return _pulsed_weight(jax.scipy.special.erf, offset, self._rp(dtype),
+                              self.gate_length.astype(dtype))
+
+    def _host_weight(self, offset):
+        """`weight` in float64 numpy (host), the rule of `_host_nodes`."""
+        rp, dp = self._host_rp_gate()
+        return _pulsed_weight(special.erf, np.asarray(offset, np.float64), rp, dp)
+
+    def _host_rp_gate(self):
+        """``(rp, gate length)`` as host floats."""
+        return float(self.pulse_fwhm) / (2 * np.sqrt(np.log(2.0))), float(self.gate_length)
 
     def support(self, focus_range=None):
         """``gate/2 + erfcinv(tail) * rp``, the same at every range."""
@@ -384,8 +398,7 @@ class PulsedProbe(AbstractProbe):
                             self.ref_nodes.astype(dtype))
 
     def _host_nodes(self, focus_range):
-        rp = float(self.pulse_fwhm) / (2 * np.sqrt(np.log(2.0)))
-        dp = float(self.gate_length)
+        rp, dp = self._host_rp_gate()
         return _pulsed_rule(np, special.erf, dp / 2 + float(self.truncation) * rp,
                             np.asarray(focus_range, np.float64), rp, dp, _midpoints(self.n_nodes))
 
@@ -853,9 +866,7 @@ def _host_gate_nodes(probe, ranges, rule):
         m, half = rule
         h = (r[1] - r[0]) / m
         offsets = np.broadcast_to((np.arange(2 * half + 1) - half) * h, (r.size, 2 * half + 1))
-        rp = float(probe.pulse_fwhm) / (2 * np.sqrt(np.log(2.0)))
-        dp = float(probe.gate_length)
-        weights = (special.erf((offsets + dp / 2) / rp) - special.erf((offsets - dp / 2) / rp)) / (2 * dp)
+        weights = probe._host_weight(offsets)
     weights = np.where(np.abs(offsets) < r[:, None], weights, 0.0)
     total = weights.sum(axis=-1, keepdims=True)
     return np.array(offsets), weights / np.where(total > 0, total, 1.0)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import scan as scans
+from ..angles import wind_direction
 from ..io import read_motion_csv, read_settings, write_scan_netcdf, write_table_csv
 from ..io.fields import load_field
 from ..mount import Mount
@@ -324,16 +325,15 @@ def write_vad_csv(path, res, metadata):
     prof = vad_fit(los, res.azimuth, res.elevation, res.ranges)
     n, _, g = los.shape
     vel = np.asarray(prof.velocity).reshape(n * g, 3)
-    u, v = vel[:, 0], vel[:, 1]
     times = np.asarray(res.times)
     cols = {
         "scan": np.repeat(np.arange(n), g),
         "time": np.repeat(times.mean(axis=1), g),
         "range": np.tile(np.asarray(res.ranges), n),
         "height": np.tile(np.asarray(prof.heights), n),
-        "u": u, "v": v, "w": vel[:, 2],
-        "speed": np.hypot(u, v),
-        "direction": np.mod(np.rad2deg(np.arctan2(-u, -v)), 360.0),
+        "u": vel[:, 0], "v": vel[:, 1], "w": vel[:, 2],
+        "speed": np.asarray(prof.speed).ravel(),
+        "direction": np.asarray(wind_direction(prof.velocity)).ravel(),
         "residual": np.asarray(prof.residual).ravel(),
         "n_rays": np.asarray(prof.n_rays).ravel(),
         "condition": np.asarray(prof.condition).ravel(),

@@ -98,8 +98,6 @@ def _refine(field, pattern, probe, caller, shared=True):
     `shared`), host choices memoised on the inputs' arrays."""
     if isinstance(probe, PointProbe) or not is_concrete(pattern.ranges, probe):
         return probe, None
-    if not shared:
-        return _refine(field, pattern, probe, caller)[0], None
 
     def choose():
         chosen = probe
@@ -112,7 +110,8 @@ def _refine(field, pattern, probe, caller, shared=True):
                                       caller=caller)
         return chosen, shared_gate_rule(chosen, pattern.ranges)
 
-    return _CHOSEN((field, pattern.ranges, probe), choose)
+    chosen, rule = _CHOSEN((field, pattern.ranges, probe), choose)
+    return chosen, rule if shared else None
 
 
 def gate_nodes(field: AbstractField, pattern: ScanPattern, probe: AbstractProbe, *,
@@ -154,13 +153,8 @@ def scan_points(field: AbstractField, pattern: ScanPattern, mount: Mount,
     if mount.batch_shape:
         raise ValueError("scan_points: needs one lidarjax.Mount, not a batch; call it per mount.")
     ranges = np.asarray(pattern.ranges, np.float64)
-    if isinstance(probe, PointProbe):
-        node_r = ranges[:, None]
-    else:
-        chosen, rule = _refine(field, pattern, probe, "scan_points", shared_nodes)
-        offsets = (_host_gate_nodes(chosen, ranges, rule)[0] if rule is not None
-                   else chosen._host_nodes(ranges)[0])
-        node_r = np.concatenate([ranges[:, None] + offsets, ranges[:, None]], axis=1)
+    offsets = gate_nodes(field, pattern, probe, shared_nodes=shared_nodes)[0]
+    node_r = np.concatenate([ranges[:, None] + offsets, ranges[:, None]], axis=1)
     rot = np.asarray(body_to_cfd_rotation(mount), np.float64)
     n = np.asarray(pattern.sub_directions(), np.float64).reshape(-1, 3) @ rot.T  # (B, 3)
     loc = np.asarray(mount.location, np.float64) + np.asarray(mount.location_lo, np.float64)
