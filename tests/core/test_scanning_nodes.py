@@ -187,3 +187,69 @@ def test_gradients_through_shared_nodes(grid, ppi, probe):
     v = jnp.asarray(vel)
     fd = (loss(v + 1e-6 * direction, loc) - loss(v - 1e-6 * direction, loc)) / 2e-6
     np.testing.assert_allclose(float(jnp.vdot(g_v, direction)), float(fd), rtol=1e-6)
+
+
+def test_window_mean_numpy_nan_and_gradients():
+    """`_window_mean` (the CPU's strided convolution): weighted means of windows ``i m ..
+    i m + q - 1`` as numpy computes them, NaN exactly where a window holds a NaN sample, and
+    derivatives (samples and weights) finite for a loss that masks the NaN windows, matching
+    finite differences."""
+    from lidarjax.probe import _window_mean
+
+    rng = np.random.default_rng(5)
+    m, q, g = 3, 7, 9
+    samples = rng.normal(size=(2, 4, (g - 1) * m + q))
+    samples[0, 1, 10] = np.nan
+    samples[1, 3, 0] = np.nan
+    phi = np.exp(-np.linspace(-1.5, 1.5, q) ** 2)
+    window = np.arange(g)[:, None] * m + np.arange(q)
+    expect = np.sum(samples[..., window] * phi, -1) / phi.sum()
+    got = np.asarray(_window_mean(jnp.asarray(samples), jnp.asarray(phi), m))
+    assert np.array_equal(np.isnan(got), np.isnan(expect)) and np.isnan(got).sum() == 3
+    np.testing.assert_allclose(got, expect, atol=1e-14, equal_nan=True)
+    ok = np.isfinite(expect)
+
+    def loss(s, w):
+        return jnp.sum(jnp.where(ok, _window_mean(s, w, m), 0.0) ** 2)
+
+    g_s, g_w = jax.grad(loss, argnums=(0, 1))(jnp.asarray(samples), jnp.asarray(phi))
+    assert np.isfinite(np.asarray(g_s)).all() and np.isfinite(np.asarray(g_w)).all()
+    clean = jnp.asarray(np.nan_to_num(samples))
+    assert_grad_matches_fd(lambda w: loss(jnp.asarray(samples), w), jnp.asarray(phi), rtol=1e-6)
+    direction = jnp.asarray(rng.normal(size=samples.shape))
+    w = jnp.asarray(phi)
+    fd = (loss(clean + 1e-6 * direction, w) - loss(clean - 1e-6 * direction, w)) / 2e-6
+    np.testing.assert_allclose(float(jnp.vdot(jnp.where(jnp.isnan(samples), 0, g_s), direction)),
+                               float(fd), rtol=1e-6)
+    # float32 follows the input dtype
+    f32 = _window_mean(jnp.asarray(samples, jnp.float32), jnp.asarray(phi, jnp.float32), m)
+    assert f32.dtype == jnp.float32
+    np.testing.assert_allclose(np.asarray(f32, np.float64), expect, atol=2e-6, equal_nan=True)
+
+
+def test_convolution_and_gather_windows_agree(grid, probe):
+    """The two ways `_gates_los` reads the gates' windows (a strided convolution on CPUs, an
+    index gather on accelerators) give the same LOS, NaN and flags, also with the lidar at
+    the grid's corner, where the nodes behind it are outside the grid (NaN) and the cut at
+    the lidar must drop them from the near gates rather than make them NaN."""
+    from lidarjax.probe import _gates_los
+    from lidarjax.scanning.simulate import _refine
+
+    field = grid[0]
+    p = sc.ppi(2.0, sc.gate_ranges(30, 10.0, first=6.0), n_rays=8, azimuth_start=10.0, azimuth_stop=80.0)
+    chosen, rule = _refine(field, p, probe, "test", True)
+    assert rule is not None and rule[1] // rule[0] >= 1  # more than one near gate
+    n = np.stack([np.sin(np.deg2rad(p.azimuth)) * np.cos(np.deg2rad(2.0)),
+                  np.cos(np.deg2rad(p.azimuth)) * np.cos(np.deg2rad(2.0)),
+                  np.full(8, np.sin(np.deg2rad(2.0)))], -1)
+    out = {}
+    for corner in ([-300.0, -300.0, 40.0], [0.0, 0.0, 40.0]):
+        for windows in ("convolution", "gather"):
+            run = jax.jit(lambda o, w=windows: _gates_los(field, o, jnp.asarray(n), p.ranges, chosen, rule,
+                                                          windows=w))
+            out[windows] = [np.asarray(a) for a in run(jnp.asarray(corner))]
+        (a, fa), (b, fb) = out["convolution"], out["gather"]
+        assert np.array_equal(np.isnan(a), np.isnan(b)) and np.array_equal(fa, fb)
+        np.testing.assert_allclose(a, b, atol=1e-12, equal_nan=True)
+    # at the corner, every near gate is finite: the nodes behind the lidar (NaN) are cut
+    assert np.isfinite(a[:3]).all() and fa[:3].any()
