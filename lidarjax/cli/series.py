@@ -12,6 +12,10 @@ cover ``--hours``, in compiled batches): the files are ``series_scan.nc`` (CF Ne
 beam x range), ``series_scan.png`` (the last scan on its cone or plane) and, for a PPI or
 VAD of at least 3 rays, ``series_vad.csv`` (the VAD wind profile of every scan, `lidarjax.scanning.vad_fit`).
 The 10-minute ``.sta`` statistics are the profilers' and are not written for a scanning scan.
+
+An OpenFOAM or VTK mean flow is made exact, the mesh's own cellPoint, at every point a fixed
+lidar samples (the same at every time), as `lidarjax simulate` does; with ``--motion`` the
+lidar samples other points at every time, and the graded grid answers.
 """
 
 from __future__ import annotations
@@ -20,15 +24,16 @@ import argparse
 import math
 from pathlib import Path
 
+import equinox as eqx
 import numpy as np
 
 from .. import scan as scans
 from ..angles import wind_direction
-from ..io import read_motion_csv, read_settings, write_scan_netcdf, write_table_csv
+from ..io import read_motion_csv, read_settings, simulate_points, write_scan_netcdf, write_table_csv
 from ..io.fields import load_field
 from ..mount import Mount
 from ..probe import PointProbe
-from ..scanning import ScanResult, simulate_scan_series, vad_fit
+from ..scanning import ScanResult, scan_points, simulate_scan_series, vad_fit
 from ..scenes import uniform
 from ..series import RECORD_LENGTH, probe_for_field, simulate_statistics
 from ..timing import schedule_for
@@ -100,8 +105,9 @@ def register(sub) -> None:
     p.add_argument("--beta", type=finite_float, default=None,
                    help="platform rotation row to use (default: the file's beta)")
     p.add_argument("--field", required=True,
-                   help="mean flow: a CFD field file (.npz, .nc, Fluent ASCII) or 'uniform' "
-                        "(uniform wind of --speed from --direction)")
+                   help="mean flow: a CFD field file (.npz, .nc, Fluent ASCII), an OpenFOAM case "
+                        "or VTK mesh (its own cellPoint at the points a fixed lidar samples), or "
+                        "'uniform' (uniform wind of --speed from --direction)")
     box = p.add_mutually_exclusive_group(required=True)
     box.add_argument("--box", help="turbulence box: a TurbSim .bts file, or three HAWC2 "
                                    "binary files 'u.bin,v.bin,w.bin' (with --box-shape)")
@@ -187,15 +193,22 @@ def run(args) -> int:
         args.probe = "cw" if args.scan == "zephir" else "pulsed"
     probe = make_probe(args)
     schedule = schedule_for(scan, seconds_per_los=args.seconds_per_los)
-    field, info = build_field(args, settings, beta, location, heights)
-
     mount = Mount(location, beta=beta, gamma=settings.gamma, psi=settings.psi,
                   epsilon=settings.epsilon)
     motion = None
     if args.motion:
         motion = read_motion_csv(args.motion)
+    auto_nodes = args.probe_nodes is None and probe is not None
+
+    def points(f):  # what simulate_statistics samples (simulate's geometry and node choice)
+        used = probe_for_field(f, scan, heights, probe, caller="lidarjax series") if auto_nodes else probe
+        return simulate_points(scan, mount, heights, used)
+
+    # a moving lidar samples other points at every time: the graded grid of a mesh then
+    field, info = build_field(args, settings, beta, location, heights,
+                              exact_points=None if motion is not None else points)
     starts = np.arange(n_rec) * RECORD_LENGTH
-    if args.probe_nodes is None and probe is not None:  # explicit --probe-nodes kept as given
+    if auto_nodes:  # explicit --probe-nodes kept as given
         # the nodes that resolve the box, chosen here once so that they can be shown
         probe = probe_for_field(field, scan, heights, probe, caller="lidarjax series")
     label = f"{type(probe).__name__}, {probe.n_nodes} nodes" if probe else "point probe"
@@ -220,42 +233,64 @@ def run(args) -> int:
     return 0
 
 
-def build_field(args, settings, beta, location, heights):
+def build_field(args, settings, beta, location, heights, exact_points=None):
     """The frozen-turbulence field of the arguments and a one-line description
-    (`lidarjax.series_field`, with the options checked and named here)."""
+    (`lidarjax.series_field`, with the options checked and named here).
+
+    `exact_points`: a function of the series field returning the points the series samples
+    (absolute CFD metres), or None. The points are fixed when the mount is (the mean flow is
+    sampled at the same points at every time), so an OpenFOAM or VTK mean flow is made
+    exact there, the mesh's own cellPoint (`lidarjax.io.load_field`'s `exact_at`), as
+    `lidarjax simulate` does; any other file is its own grid."""
+
+    def frozen(mean):
+        speed, direction = args.speed, args.direction
+        if speed is None or direction is None:
+            s, d = mean_wind_above(mean, location, float(heights[-1]))
+            if not np.isfinite(s):
+                top = np.asarray(location, np.float64) + np.array([0.0, 0.0, float(heights[-1])])
+                raise ValueError(f"the mean flow is undefined above the lidar at {top.tolist()}; "
+                                 "give --speed and --direction")
+            speed = s if speed is None else float(speed)
+            direction = d if direction is None else float(direction)
+        if not speed > 0:
+            raise ValueError(f"the advection speed must be positive, got {speed}")
+        box = None
+        if args.generate_box is None:
+            parts = args.box.split(",")
+            if len(parts) == 1:
+                box = parts[0]
+            elif len(parts) == 3:
+                if args.box_shape is None:
+                    raise ValueError("HAWC2 boxes need --box-shape nx,ny,nz (and --box-spacing)")
+                box = parts
+            else:
+                raise ValueError(f"--box must be one .bts file or three files u,v,w; got {args.box!r}")
+        return series_field(mean, location, speed=speed, direction=direction, box=box,
+                            box_shape=args.box_shape, box_spacing=args.box_spacing,
+                            generate_box=args.generate_box, length_scale=args.length_scale,
+                            gamma=args.gamma, ti=args.ti, seed=args.seed, generator=args.generator)
 
     if args.field == "uniform":
         if args.speed is None or args.direction is None:
             raise ValueError("--field uniform needs --speed and --direction")
-        mean = uniform(args.speed, args.direction)
-    else:
-        mean = load_field(args.field)
-    speed, direction = args.speed, args.direction
-    if speed is None or direction is None:
-        s, d = mean_wind_above(mean, location, float(heights[-1]))
-        if not np.isfinite(s):
-            top = np.asarray(location, np.float64) + np.array([0.0, 0.0, float(heights[-1])])
-            raise ValueError(f"the mean flow is undefined above the lidar at {top.tolist()}; "
-                             "give --speed and --direction")
-        speed = s if speed is None else float(speed)
-        direction = d if direction is None else float(direction)
-    if not speed > 0:
-        raise ValueError(f"the advection speed must be positive, got {speed}")
-    box = None
-    if args.generate_box is None:
-        parts = args.box.split(",")
-        if len(parts) == 1:
-            box = parts[0]
-        elif len(parts) == 3:
-            if args.box_shape is None:
-                raise ValueError("HAWC2 boxes need --box-shape nx,ny,nz (and --box-spacing)")
-            box = parts
-        else:
-            raise ValueError(f"--box must be one .bts file or three files u,v,w; got {args.box!r}")
-    return series_field(mean, location, speed=speed, direction=direction, box=box,
-                        box_shape=args.box_shape, box_spacing=args.box_spacing,
-                        generate_box=args.generate_box, length_scale=args.length_scale,
-                        gamma=args.gamma, ti=args.ti, seed=args.seed, generator=args.generator)
+        return frozen(uniform(args.speed, args.direction))
+    if exact_points is None:
+        return frozen(load_field(args.field))
+    # a mesh: the series field over its graded grid gives the points (its probe nodes follow
+    # the box's and the grid's resolution); the box is built once, and the exact mean flow
+    # then replaces the grid under it
+    made = {}
+
+    def at(grid):
+        made["field"] = frozen(grid)
+        return exact_points(made["field"][0])
+
+    mean, report = load_field(args.field, exact_at=at, return_report=True)
+    if not made:  # a gridded file: its own grid
+        return frozen(mean)
+    field, info = made["field"]
+    return eqx.tree_at(lambda f: f.mean, field, mean), f"{info}; mean flow: {report.notes[-1]}"
 
 
 def run_scanning(args, settings, beta, location, heights, start) -> int:
@@ -276,10 +311,13 @@ def run_scanning(args, settings, beta, location, heights, start) -> int:
               ("--scan", args.scan), ("--motion", args.motion)]
     inputs += [("--box", b) for b in (args.box.split(",") if args.box else ())]
     out = check_output_folder(args.out, files=files, inputs=inputs)
-    field, info = build_field(args, settings, beta, location, heights)
     mount = Mount(location, beta=beta, gamma=settings.gamma, psi=settings.psi,
                   epsilon=settings.epsilon)
     motion = read_motion_csv(args.motion) if args.motion else None
+    # an OpenFOAM or VTK mean flow made exact at every point the scan samples (a fixed
+    # mount samples the same points at every time; a moving one, the graded grid)
+    field, info = build_field(args, settings, beta, location, heights, exact_points=None if motion else (
+        lambda f: scan_points(f, pattern, mount, probe)))
     # probe nodes per gate, to size the batches only (16: typical of a count chosen for a box)
     nodes = 1 if isinstance(probe, PointProbe) else (args.probe_nodes or 16)
     per = args.chunk or max(1, SCAN_BATCH_SAMPLES

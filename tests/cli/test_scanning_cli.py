@@ -253,3 +253,42 @@ def test_an_input_is_never_overwritten(case, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "inputs are never overwritten" in err and "\n" not in err
     assert field.read_bytes() == before
+
+
+def test_series_on_a_mesh_is_its_cellpoint_at_the_gates(tmp_path, capsys):
+    """`lidarjax series --scan` over an OpenFOAM mean flow (the real windAroundBuildings cut,
+    a lidar on the roof) samples the mesh's own cellPoint at every gate, as `simulate --scan`
+    does: with a calm box (TI 1e-9) each gate is ``n . U`` of OpenFOAM's cellPoint there
+    (`sample_openfoam`, numpy) to 1e-7 m/s; the graded grid alone is off by more."""
+    pytest.importorskip("foamlib")
+    from lidarjax.io import load_field
+    from lidarjax.io.openfoam import read_openfoam_field, sample_openfoam
+
+    case = DATA / "openfoam" / "windAroundBuildings_cut"
+    roof = [96.0, 126.0, 39.0]
+    settings = tmp_path / "settings.dat"
+    write_settings(settings, Settings(zone=2, verbose=1, height=10.0, nh=1, gamma=0.0, beta=0.0,
+                                      psi=0.0, epsilon=0.0, betas=np.array([0.0]),
+                                      locations=np.array([roof])))
+    out = tmp_path / "out"
+    argv = ["series", str(settings), "--field", str(case), "--speed", "5", "--direction", "270",
+            "--generate-box", "8,4,4", "--box-spacing", "40,40,40", "--ti", "1e-9",
+            "--probe", "point", "--scan", "ppi", "--elevation", "40", "--n-rays", "8",
+            "--gates", "6", "--gate-length", "3", "--accumulation", "0.5", "--scans", "1",
+            "--no-plots", "--out", str(out)]
+    assert main(argv) == 0
+    assert "exact cellPoint" in capsys.readouterr().out
+    back = read_scan_netcdf(out / "series_scan.nc")
+    az, el = np.deg2rad(back["azimuth"]), np.deg2rad(back["elevation"])
+    n = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], -1)  # (r, 3)
+    pts = np.asarray(roof) + back["range"][None, :, None] * n[:, None, :]  # (r, g, 3)
+    of = read_openfoam_field(case)
+    expect = np.einsum("rgi,ri->rg", sample_openfoam(of, pts.reshape(-1, 3)).reshape(pts.shape), n)
+    got = back["radial_velocity"][0]
+    assert np.isfinite(expect).sum() > 20
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(expect))
+    np.testing.assert_allclose(got, expect, rtol=0, atol=1e-7)
+    grid = load_field(case)
+    pattern = lj.scanning.ppi(40.0, back["range"], n_rays=8, accumulation=0.5)
+    graded = np.asarray(lj.scanning.simulate_scan(grid, pattern, lj.Mount(roof)).los)
+    assert np.nanmax(np.abs(graded - expect)) > 1e-3

@@ -28,3 +28,42 @@ def test_series_command_writes_sta_and_statistics(tmp_path, capsys):
     assert "TI_lidar" in capsys.readouterr().out
     assert main(args + ["--hours", "0.01"]) == 2
     assert "no whole 10-minute record" in capsys.readouterr().err
+
+
+def test_series_on_a_mesh_matches_simulate_there(tmp_path, capsys):
+    """A profiler's series over an OpenFOAM mean flow (the real windAroundBuildings cut, a
+    Windcube V2 on the roof, a 31-node pulsed probe) samples the mesh's own cellPoint at the points it
+    flies through, as `lidarjax simulate` does: with a calm box (TI 1e-9) the 10-minute mean
+    speed and the point speed equal simulate's ``U_mag_lidar`` and ``U_mag_point`` to 1e-6
+    m/s; the graded grid alone (a moving lidar samples it) is off by more than 1e-4."""
+    import pytest
+
+    pytest.importorskip("foamlib")
+    from lidarjax.cli import main
+    from lidarjax.io import Settings, read_table_csv, write_settings
+
+    from ..helpers import DATA
+
+    case = DATA / "openfoam" / "windAroundBuildings_cut"
+    settings = tmp_path / "settings.dat"
+    write_settings(settings, Settings(zone=2, verbose=1, height=10.0, nh=2, gamma=0.0, beta=0.0,
+                                      psi=0.0, epsilon=0.0, betas=np.array([0.0]),
+                                      locations=np.array([[96.0, 126.0, 39.0]])))
+    assert main(["simulate", str(settings), "--field", str(case), "--scan", "windcube_v2",
+                 "--probe", "pulsed", "--probe-nodes", "31", "--out", str(tmp_path / "sim")]) == 0
+    sim = read_table_csv(tmp_path / "sim" / "simulation_0.csv").columns
+    args = ["series", str(settings), "--field", str(case), "--speed", "5", "--direction", "270",
+            "--generate-box", "8,4,4", "--box-spacing", "40,40,40", "--ti", "1e-9",
+            "--hours", "0.17", "--probe", "pulsed", "--probe-nodes", "31", "--no-plots"]
+    assert main(args + ["--out", str(tmp_path / "ser")]) == 0
+    assert "exact cellPoint" in capsys.readouterr().out
+    ser = read_table_csv(tmp_path / "ser" / "series_statistics.csv").columns
+    assert np.isfinite(sim["U_mag_lidar"]).all()
+    np.testing.assert_allclose(ser["speed"], sim["U_mag_lidar"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(ser["cup_speed"], sim["U_mag_point"], rtol=0, atol=1e-6)
+    # a (still) moving lidar: the graded grid, which misses the roof's shear layer
+    motion = tmp_path / "still.csv"
+    motion.write_text("time,surge,sway,heave,roll,pitch,yaw\n0,0,0,0,0,0,0\n1000,0,0,0,0,0,0\n")
+    assert main(args + ["--motion", str(motion), "--out", str(tmp_path / "moving")]) == 0
+    moving = read_table_csv(tmp_path / "moving" / "series_statistics.csv").columns
+    assert np.nanmax(np.abs(moving["speed"] - sim["U_mag_lidar"])) > 1e-4
