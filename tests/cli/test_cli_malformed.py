@@ -585,9 +585,12 @@ def test_interrupted_write_leaves_no_temporary_file(case, tmp_path, sig, code):
         assert list(tmp_path.iterdir()), "the temporary file should exist while writing"
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
-    finally:
+    finally:  # never leave the child running (its warnings would land in another test)
         if proc.poll() is None:
             proc.kill()
+            proc.wait()
+        proc.stdout.close()
+        proc.stderr.close()
     assert proc.returncode == code, err
     assert "Traceback" not in err
     last = [ln for ln in err.splitlines() if ln.strip()][-1]
