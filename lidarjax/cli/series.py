@@ -13,9 +13,11 @@ beam x range), ``series_scan.png`` (the last scan on its cone or plane) and, for
 VAD of at least 3 rays, ``series_vad.csv`` (the VAD wind profile of every scan, `lidarjax.scanning.vad_fit`).
 The 10-minute ``.sta`` statistics are the profilers' and are not written for a scanning scan.
 
-An OpenFOAM or VTK mean flow is made exact, the mesh's own cellPoint, at every point a fixed
-lidar samples (the same at every time), as `lidarjax simulate` does; with ``--motion`` the
-lidar samples other points at every time, and the graded grid answers.
+A fixed lidar's mean flow is read only where its beams look (`lidarjax.scan_bounds`, or the
+scanning scan's region, with the height the advection is taken from), and an OpenFOAM or VTK
+mean flow is made exact there, the mesh's own cellPoint, at every point the lidar samples
+(the same at every time), as `lidarjax simulate` does. With ``--motion`` the lidar samples
+other points at every time: the whole mean flow is read and its graded grid answers.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import numpy as np
 
 from .. import scan as scans
 from ..angles import wind_direction
+from ..footprint import scan_bounds
 from ..io import read_motion_csv, read_settings, simulate_points, write_scan_netcdf, write_table_csv
 from ..io.fields import load_field
 from ..mount import Mount
@@ -56,6 +59,7 @@ from ._scanning import (
     plot_scan,
     read_scan_source,
     scan_choice,
+    scan_region,
     scanning_probe,
 )
 
@@ -204,9 +208,12 @@ def run(args) -> int:
         used = probe_for_field(f, scan, heights, probe, caller="lidarjax series") if auto_nodes else probe
         return simulate_points(scan, mount, heights, used)
 
-    # a moving lidar samples other points at every time: the graded grid of a mesh then
+    # a moving lidar samples other points at every time: the graded grid of a mesh then, and
+    # the whole mean flow (its excursions are not bounded here)
+    fixed = motion is None
+    region = scan_bounds(scan, mount, heights, probe=probe) if fixed else None
     field, info = build_field(args, settings, beta, location, heights,
-                              exact_points=None if motion is not None else points)
+                              exact_points=points if fixed else None, region=region)
     starts = np.arange(n_rec) * RECORD_LENGTH
     if auto_nodes:  # explicit --probe-nodes kept as given
         # the nodes that resolve the box, chosen here once so that they can be shown
@@ -233,9 +240,13 @@ def run(args) -> int:
     return 0
 
 
-def build_field(args, settings, beta, location, heights, exact_points=None):
+def build_field(args, settings, beta, location, heights, exact_points=None, region=None):
     """The frozen-turbulence field of the arguments and a one-line description
     (`lidarjax.series_field`, with the options checked and named here).
+
+    `region`: ``(lo, hi)`` absolute CFD metres, the box the series samples (with the point
+    ``heights[-1]`` above the lidar, where the advection is taken from when not given): the
+    mean flow file is read only there (`lidarjax.io.load_field`), or None: all of it.
 
     `exact_points`: a function of the series field returning the points the series samples
     (absolute CFD metres), or None. The points are fixed when the mount is (the mean flow is
@@ -276,7 +287,7 @@ def build_field(args, settings, beta, location, heights, exact_points=None):
             raise ValueError("--field uniform needs --speed and --direction")
         return frozen(uniform(args.speed, args.direction))
     if exact_points is None:
-        return frozen(load_field(args.field))
+        return frozen(load_field(args.field, region=region))
     # a mesh: the series field over its graded grid gives the points (its probe nodes follow
     # the box's and the grid's resolution); the box is built once, and the exact mean flow
     # then replaces the grid under it
@@ -286,7 +297,7 @@ def build_field(args, settings, beta, location, heights, exact_points=None):
         made["field"] = frozen(grid)
         return exact_points(made["field"][0])
 
-    mean, report = load_field(args.field, exact_at=at, return_report=True)
+    mean, report = load_field(args.field, region=region, exact_at=at, return_report=True)
     if not made:  # a gridded file: its own grid
         return frozen(mean)
     field, info = made["field"]
@@ -316,8 +327,13 @@ def run_scanning(args, settings, beta, location, heights, start) -> int:
     motion = read_motion_csv(args.motion) if args.motion else None
     # an OpenFOAM or VTK mean flow made exact at every point the scan samples (a fixed
     # mount samples the same points at every time; a moving one, the graded grid)
+    region = None
+    if motion is None:  # read only where the scan looks, and the advection's height above it
+        lo, hi = scan_region(pattern, mount, probe)
+        top = np.asarray(location, np.float64) + np.array([0.0, 0.0, float(heights[-1])])
+        region = (np.minimum(lo, top), np.maximum(hi, top))
     field, info = build_field(args, settings, beta, location, heights, exact_points=None if motion else (
-        lambda f: scan_points(f, pattern, mount, probe)))
+        lambda f: scan_points(f, pattern, mount, probe)), region=region)
     # probe nodes per gate, to size the batches only (16: typical of a count chosen for a box)
     nodes = 1 if isinstance(probe, PointProbe) else (args.probe_nodes or 16)
     per = args.chunk or max(1, SCAN_BATCH_SAMPLES

@@ -255,14 +255,24 @@ def test_an_input_is_never_overwritten(case, tmp_path, capsys):
     assert field.read_bytes() == before
 
 
-def test_series_on_a_mesh_is_its_cellpoint_at_the_gates(tmp_path, capsys):
+def test_series_on_a_mesh_is_its_cellpoint_at_the_gates(tmp_path, capsys, monkeypatch):
     """`lidarjax series --scan` over an OpenFOAM mean flow (the real windAroundBuildings cut,
-    a lidar on the roof) samples the mesh's own cellPoint at every gate, as `simulate --scan`
-    does: with a calm box (TI 1e-9) each gate is ``n . U`` of OpenFOAM's cellPoint there
-    (`sample_openfoam`, numpy) to 1e-7 m/s; the graded grid alone is off by more."""
+    a lidar on the roof) reads the mesh only over the scan's region and samples its own
+    cellPoint at every gate, as `simulate --scan` does: with a calm box (TI 1e-9) each gate
+    is ``n . U`` of OpenFOAM's cellPoint there (`sample_openfoam`, numpy) to 1e-7 m/s; the
+    graded grid alone is off by more."""
     pytest.importorskip("foamlib")
+    import lidarjax.cli.series as series_cli
     from lidarjax.io import load_field
     from lidarjax.io.openfoam import read_openfoam_field, sample_openfoam
+
+    regions = []
+
+    def spy(path, **kw):
+        regions.append(kw.get("region"))
+        return load_field(path, **kw)
+
+    monkeypatch.setattr(series_cli, "load_field", spy)
 
     case = DATA / "openfoam" / "windAroundBuildings_cut"
     roof = [96.0, 126.0, 39.0]
@@ -285,6 +295,9 @@ def test_series_on_a_mesh_is_its_cellpoint_at_the_gates(tmp_path, capsys):
     of = read_openfoam_field(case)
     expect = np.einsum("rgi,ri->rg", sample_openfoam(of, pts.reshape(-1, 3)).reshape(pts.shape), n)
     got = back["radial_velocity"][0]
+    (lo, hi), = regions  # the gates and the advection's height (10 m) above the lidar
+    assert np.all(pts >= lo - 1e-9) and np.all(pts <= hi + 1e-9)
+    assert hi[2] >= roof[2] + 10.0 and np.all(hi - lo < 40.0)
     assert np.isfinite(expect).sum() > 20
     np.testing.assert_array_equal(np.isnan(got), np.isnan(expect))
     np.testing.assert_allclose(got, expect, rtol=0, atol=1e-7)

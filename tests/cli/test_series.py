@@ -30,7 +30,7 @@ def test_series_command_writes_sta_and_statistics(tmp_path, capsys):
     assert "no whole 10-minute record" in capsys.readouterr().err
 
 
-def test_series_on_a_mesh_matches_simulate_there(tmp_path, capsys):
+def test_series_on_a_mesh_matches_simulate_there(tmp_path, capsys, monkeypatch):
     """A profiler's series over an OpenFOAM mean flow (the real windAroundBuildings cut, a
     Windcube V2 on the roof, a 31-node pulsed probe) samples the mesh's own cellPoint at the points it
     flies through, as `lidarjax simulate` does: with a calm box (TI 1e-9) the 10-minute mean
@@ -39,11 +39,19 @@ def test_series_on_a_mesh_matches_simulate_there(tmp_path, capsys):
     import pytest
 
     pytest.importorskip("foamlib")
+    import lidarjax.cli.series as series_cli
     from lidarjax.cli import main
-    from lidarjax.io import Settings, read_table_csv, write_settings
+    from lidarjax.io import Settings, load_field, read_table_csv, write_settings
 
     from ..helpers import DATA
 
+    regions = []
+
+    def spy(path, **kw):
+        regions.append(kw.get("region"))
+        return load_field(path, **kw)
+
+    monkeypatch.setattr(series_cli, "load_field", spy)
     case = DATA / "openfoam" / "windAroundBuildings_cut"
     settings = tmp_path / "settings.dat"
     write_settings(settings, Settings(zone=2, verbose=1, height=10.0, nh=2, gamma=0.0, beta=0.0,
@@ -66,4 +74,7 @@ def test_series_on_a_mesh_matches_simulate_there(tmp_path, capsys):
     motion.write_text("time,surge,sway,heave,roll,pitch,yaw\n0,0,0,0,0,0,0\n1000,0,0,0,0,0,0\n")
     assert main(args + ["--motion", str(motion), "--out", str(tmp_path / "moving")]) == 0
     moving = read_table_csv(tmp_path / "moving" / "series_statistics.csv").columns
+    # the fixed lidar read only where its beams look (10 m up, cone 28 deg); the moving one all
+    (lo, hi), everything = regions
+    assert everything is None and hi[2] >= 39.0 + 10.0 and np.all(hi - lo < 30.0)
     assert np.nanmax(np.abs(moving["speed"] - sim["U_mag_lidar"])) > 1e-4
