@@ -262,24 +262,15 @@ def test_series_on_a_mesh_is_its_cellpoint_at_the_gates(tmp_path, capsys, monkey
     is ``n . U`` of OpenFOAM's cellPoint there (`sample_openfoam`, numpy) to 1e-7 m/s; the
     graded grid alone is off by more."""
     pytest.importorskip("foamlib")
-    import lidarjax.cli.series as series_cli
     from lidarjax.io import load_field
     from lidarjax.io.openfoam import read_openfoam_field, sample_openfoam
 
-    regions = []
+    from ._roof import CASE as case
+    from ._roof import ROOF as roof
+    from ._roof import record_regions, roof_settings
 
-    def spy(path, **kw):
-        regions.append(kw.get("region"))
-        return load_field(path, **kw)
-
-    monkeypatch.setattr(series_cli, "load_field", spy)
-
-    case = DATA / "openfoam" / "windAroundBuildings_cut"
-    roof = [96.0, 126.0, 39.0]
-    settings = tmp_path / "settings.dat"
-    write_settings(settings, Settings(zone=2, verbose=1, height=10.0, nh=1, gamma=0.0, beta=0.0,
-                                      psi=0.0, epsilon=0.0, betas=np.array([0.0]),
-                                      locations=np.array([roof])))
+    regions = record_regions(monkeypatch)
+    settings = roof_settings(tmp_path / "settings.dat", nh=1)
     out = tmp_path / "out"
     argv = ["series", str(settings), "--field", str(case), "--speed", "5", "--direction", "270",
             "--generate-box", "8,4,4", "--box-spacing", "40,40,40", "--ti", "1e-9",

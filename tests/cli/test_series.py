@@ -39,24 +39,14 @@ def test_series_on_a_mesh_matches_simulate_there(tmp_path, capsys, monkeypatch):
     import pytest
 
     pytest.importorskip("foamlib")
-    import lidarjax.cli.series as series_cli
     from lidarjax.cli import main
-    from lidarjax.io import Settings, load_field, read_table_csv, write_settings
+    from lidarjax.io import read_table_csv
 
-    from ..helpers import DATA
+    from ._roof import CASE as case
+    from ._roof import record_regions, roof_settings
 
-    regions = []
-
-    def spy(path, **kw):
-        regions.append(kw.get("region"))
-        return load_field(path, **kw)
-
-    monkeypatch.setattr(series_cli, "load_field", spy)
-    case = DATA / "openfoam" / "windAroundBuildings_cut"
-    settings = tmp_path / "settings.dat"
-    write_settings(settings, Settings(zone=2, verbose=1, height=10.0, nh=2, gamma=0.0, beta=0.0,
-                                      psi=0.0, epsilon=0.0, betas=np.array([0.0]),
-                                      locations=np.array([[96.0, 126.0, 39.0]])))
+    regions = record_regions(monkeypatch)
+    settings = roof_settings(tmp_path / "settings.dat", nh=2)
     assert main(["simulate", str(settings), "--field", str(case), "--scan", "windcube_v2",
                  "--probe", "pulsed", "--probe-nodes", "31", "--out", str(tmp_path / "sim")]) == 0
     sim = read_table_csv(tmp_path / "sim" / "simulation_0.csv").columns
