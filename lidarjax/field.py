@@ -195,6 +195,80 @@ class DirectSampler(TimeSampler):
         return self.field.los_local_at(points, directions, time)
 
 
+
+# A fixed direction, not along any axis or diagonal, on which `PointIndex` sorts its points.
+_KEY = np.array([0.5773502691896258, 0.6741998624632421, 0.46056110315609574])
+_KEY = _KEY / np.linalg.norm(_KEY)
+
+
+class PointIndex(eqx.Module):
+    """Prepared points and the lookup of the nearest one within a tolerance, for fields that
+    answer exactly at prepared points (`lidarjax.workflows.MonitorPointField`,
+    `lidarjax.io.CellPointField`).
+
+    The points are sorted along a fixed direction; a query is compared with the few points
+    whose projection lies within the tolerance of its own (a binary search, then a fixed
+    window), so it costs O(log n) per query in memory and time. Projections are elementwise
+    products summed, never a ``dot``: a GPU may run a float32 ``dot`` in TensorFloat-32.
+
+    - `points`: ``(n, 3)`` the points relative to the field's origin (metres), in the
+      field's working dtype.
+    - `tolerance`: the match distance (metres).
+    - `projection`, `order`: the sorted projections and the points' order.
+    - `window` (static): the most points any interval of twice the tolerance holds (at least
+      4, one compiled shape for small sets).
+    """
+
+    points: Float[Array, "n 3"]
+    tolerance: Float[Array, ""]
+    projection: Float[Array, " n"]
+    order: Array
+    window: int = eqx.field(static=True)
+
+    @classmethod
+    def build(cls, local, dtype, tolerance=None, *, caller: str) -> PointIndex:
+        """The index of `local` ``(n, 3)`` points (float64 metres relative to the field's
+        origin) kept in `dtype`. `tolerance` (metres): default ``1e-9`` (float64) or ``2e-5``
+        (float32) times the largest distance of a point from the origin (at least that times
+        one metre), which covers the rounding of points a simulation forms in that dtype.
+        `caller` names the field in the error for a non-positive tolerance."""
+        local = np.asarray(local, np.float64)
+        if tolerance is None:
+            rel = 1e-9 if np.dtype(dtype).itemsize >= 8 else 2e-5
+            tolerance = rel * max(1.0, float(np.linalg.norm(local, axis=1).max()))
+        tol = float(tolerance)
+        if not tol > 0:
+            raise ValueError(f"{caller}: tolerance must be positive metres, got {tolerance!r}")
+        kept = local.astype(dtype)  # the points as stored, rounded to the dtype
+        proj = (kept.astype(np.float64) * _KEY).sum(axis=1)
+        order = np.argsort(proj, kind="stable")
+        sp = proj[order]
+        # a query's match lies at most this many places after the first point within tol
+        count = np.searchsorted(sp, sp + 2 * tol, side="right") - np.arange(sp.size)
+        return cls(points=jnp.asarray(kept), tolerance=jnp.asarray(tol, dtype),
+                   projection=jnp.asarray(sp.astype(dtype)), order=jnp.asarray(order.astype(np.int32)),
+                   window=max(4, int(count.max())))
+
+    @property
+    def n_points(self) -> int:
+        return int(self.points.shape[0])
+
+    def match(self, points: Float[Array, "... 3"]):
+        """``(index, hit)``: the nearest prepared point ``(...)`` to each query (local metres,
+        in the index's dtype) and whether it lies within the tolerance."""
+        p = jnp.sum(points * jnp.asarray(_KEY, points.dtype), axis=-1)
+        # compare_all: O(queries x points) comparisons but the quickest to compile; the
+        # points of one mount number a few hundred to a few thousand
+        method = "compare_all" if self.n_points <= 4096 else "scan"
+        start = jnp.searchsorted(self.projection, p - self.tolerance, side="left", method=method)
+        idx = jnp.clip(start[..., None] + jnp.arange(self.window), 0, self.n_points - 1)
+        cand = self.order[idx]  # (..., window)
+        d2 = jnp.sum((self.points[cand] - points[..., None, :]) ** 2, axis=-1)
+        k = jnp.argmin(d2, axis=-1)
+        best = jnp.take_along_axis(cand, k[..., None], axis=-1)[..., 0]
+        dmin = jnp.take_along_axis(d2, k[..., None], axis=-1)[..., 0]
+        return best, dmin <= self.tolerance**2
+
 def _check_axis(name: str, values) -> np.ndarray:
     arr = np.asarray(values, dtype=np.float64)
     if arr.ndim != 1:

@@ -20,9 +20,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Float, Int
+from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ..field import AbstractField, GridField
+from ..field import AbstractField, GridField, PointIndex
 from ..frames import lidar_to_cfd_rotation, rotate, tilt_rotation
 from ..mount import Mount
 from ..probe import AbstractProbe, PointProbe
@@ -31,9 +31,6 @@ from ._cells import CellPointSampler
 
 __all__ = ["CellPointField", "cellpoint_field", "simulate_points"]
 
-# A fixed direction, not along any axis or diagonal, on which the prepared points are sorted.
-_KEY = np.array([0.5773502691896258, 0.6741998624632421, 0.46056110315609574])
-_KEY = _KEY / np.linalg.norm(_KEY)
 
 
 class CellPointField(AbstractField):
@@ -59,22 +56,17 @@ class CellPointField(AbstractField):
     point, its index under `stop_gradient`): exact cellPoint there, NaN where the point is in
     no cell (a solid, as OpenFOAM's "Not Found"), differentiable in `values` and in the query
     position (the barycentric coordinates). Any other query: the grid's trilinear value.
-    The lookup sorts the points along a fixed direction and compares a query with the few
-    points whose projection lies within the tolerance (a binary search, then a fixed window).
+    The lookup is a `lidarjax.field.PointIndex` (O(log n) per query).
     """
 
     grid: GridField
     origin: Float[Array, 3]
     origin_lo: Float[Array, 3]
-    points_local: Float[Array, "n 3"]
+    index: PointIndex
     anchor: Float[Array, "n 3"]
     inverse: Float[Array, "n 3 3"]
     values: Float[Array, "n 4 3"]
     found: Bool[Array, " n"]
-    tolerance: Float[Array, ""]
-    projection: Float[Array, " n"]
-    order: Int[Array, " n"]
-    window: int = eqx.field(static=True)
 
     def __init__(self, grid: GridField, points: Any, vertices: Any, values: Any, *,
                  tolerance: float | None = None):
@@ -106,25 +98,11 @@ class CellPointField(AbstractField):
         inv = np.zeros_like(edges)
         if found.any():
             inv[found] = np.linalg.inv(edges[found])
-        if tolerance is None:
-            rel_tol = 1e-9 if np.dtype(dtype).itemsize >= 8 else 2e-5
-            tolerance = rel_tol * max(1.0, float(np.linalg.norm(pts - o64, axis=1).max()))
-        tol = float(tolerance)
-        if not tol > 0:
-            raise ValueError(f"CellPointField: `tolerance` must be positive metres, got {tolerance!r}")
-        proj = (local.astype(np.float64) * _KEY).sum(axis=1)
-        order = np.argsort(proj, kind="stable")
-        sp = proj[order]
-        count = np.searchsorted(sp, sp + 2 * tol, side="right") - np.arange(sp.size)
-        self.window = max(4, int(count.max()))
-        self.points_local = jnp.asarray(local)
+        self.index = PointIndex.build(pts - o64, dtype, tolerance, caller="CellPointField")
         self.anchor = jnp.asarray(np.where(found[:, None], rel[:, 0], 0.0).astype(dtype))
         self.inverse = jnp.asarray(inv.astype(dtype))
         self.values = jnp.asarray(np.where(found[:, None, None], val, 0.0).astype(dtype))
         self.found = jnp.asarray(found)
-        self.tolerance = jnp.asarray(tol, dtype)
-        self.projection = jnp.asarray(sp.astype(dtype))
-        self.order = jnp.asarray(order.astype(np.int32))
 
     @property
     def resolution(self) -> float | None:
@@ -134,28 +112,29 @@ class CellPointField(AbstractField):
     @property
     def n_points(self) -> int:
         """Number of prepared points."""
-        return int(self.points_local.shape[0])
+        return self.index.n_points
+
+    @property
+    def points_local(self) -> Float[Array, "n 3"]:
+        """The prepared points relative to `origin` (metres, the grid's dtype)."""
+        return self.index.points
+
+    @property
+    def tolerance(self) -> Float[Array, ""]:
+        """The match distance (metres)."""
+        return self.index.tolerance
 
     @property
     def nbytes(self) -> int:
         """Bytes held by the grid and the prepared tetrahedra."""
         extra = sum(int(a.size * a.dtype.itemsize) for a in (
-            self.points_local, self.anchor, self.inverse, self.values, self.projection, self.order))
+            self.index.points, self.anchor, self.inverse, self.values, self.index.projection,
+            self.index.order))
         return self.grid.nbytes + extra
 
     def _match(self, points):
         """Index of the nearest prepared point `(...)` and whether it is within tolerance."""
-        # elementwise products, never a `dot`: a GPU may run a float32 dot in TF32
-        p = jnp.sum(points * jnp.asarray(_KEY, self.dtype), axis=-1)
-        method = "compare_all" if self.n_points <= 4096 else "scan"
-        start = jnp.searchsorted(self.projection, p - self.tolerance, side="left", method=method)
-        idx = jnp.clip(start[..., None] + jnp.arange(self.window), 0, self.n_points - 1)
-        cand = self.order[idx]  # (..., window)
-        d2 = jnp.sum((self.points_local[cand] - points[..., None, :]) ** 2, axis=-1)
-        k = jnp.argmin(d2, axis=-1)
-        best = jnp.take_along_axis(cand, k[..., None], axis=-1)[..., 0]
-        dmin = jnp.take_along_axis(d2, k[..., None], axis=-1)[..., 0]
-        return best, dmin <= self.tolerance**2
+        return self.index.match(points)
 
     def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
         """Velocity (m/s, CFD frame) at points relative to `origin` (metres): cellPoint at the

@@ -28,16 +28,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float, Int
+from jaxtyping import Array, ArrayLike, Float
 
 from .._precision import default_float, is_concrete, split
 from .._util import format_number
 from ..corrections import DEFAULT_RATIO_TOL
-from ..field import AbstractField
+from ..field import AbstractField, PointIndex
 from ..forward import Simulation, simulate
 from ..io.monitor_points import FOCUS_FALLBACK, POINT_REFERENCE, MonitorPoints
 from ..mount import Mount
@@ -193,10 +192,6 @@ def monitor_points(
         weight=np.array(cols["weight"], np.float64))
 
 
-# A fixed direction, not along any axis or diagonal, on which probe points are sorted.
-_KEY = np.array([0.5773502691896258, 0.6741998624632421, 0.46056110315609574])
-_KEY = _KEY / np.linalg.norm(_KEY)
-
 
 class MonitorPointField(AbstractField):
     """Velocities known at scattered points only: a field that returns the sampled value at
@@ -220,20 +215,15 @@ class MonitorPointField(AbstractField):
       Points closer than that are taken as one location (e.g. the vertical beam's focus
       and the point reference above the lidar), whichever of them is nearest.
 
-    The lookup sorts the points along a fixed direction and compares each query with the
-    few points whose projection lies within the tolerance (a binary search, then a fixed
-    window), so it costs O(log n) per query in memory and time. Gradients flow to
-    `velocity`; the lookup itself has no spatial derivative (the field is a table).
+    The lookup is a `lidarjax.field.PointIndex` (O(log n) per query in memory and time).
+    Gradients flow to `velocity`; the lookup itself has no spatial derivative (the field is
+    a table).
     """
 
     origin: Float[Array, 3]
     origin_lo: Float[Array, 3]
-    points_local: Float[Array, "n 3"]
+    index: PointIndex
     velocity: Float[Array, "n 3"]
-    tolerance: Float[Array, ""]
-    projection: Float[Array, " n"]
-    order: Int[Array, " n"]
-    window: int = eqx.field(static=True)
 
     def __init__(self, points, velocity, *, origin=None, tolerance=None):
         pts = np.asarray(points, np.float64)
@@ -254,47 +244,29 @@ class MonitorPointField(AbstractField):
         else:
             o64 = pts.mean(axis=0) if origin is None else np.asarray(origin, np.float64).reshape(3)
             self.origin, self.origin_lo = split(o64, dtype)
-        local = pts - o64
-        if tolerance is None:
-            rel = 1e-9 if np.dtype(dtype).itemsize >= 8 else 2e-5
-            tolerance = rel * max(1.0, float(np.linalg.norm(local, axis=1).max()))
-        tol = float(tolerance)
-        if not tol > 0:
-            raise ValueError(f"MonitorPointField: tolerance must be positive metres, got {tolerance!r}")
-        proj = local @ _KEY
-        order = np.argsort(proj, kind="stable")
-        sp = proj[order]
-        # the most points any window of width 2 * tol holds: a query's match lies at most
-        # that many places after the first point within tol of the query's projection
-        count = np.searchsorted(sp, sp + 2 * tol, side="right") - np.arange(sp.size)
-        self.window = max(4, int(count.max()))  # a floor keeps one compiled shape
-        self.points_local = jnp.asarray(local.astype(dtype))
+        self.index = PointIndex.build(pts - o64, dtype, tolerance, caller="MonitorPointField")
         self.velocity = vel
-        self.tolerance = jnp.asarray(tol, dtype)
-        self.projection = jnp.asarray(sp.astype(dtype))
-        self.order = jnp.asarray(order.astype(np.int32))
 
     @property
     def n_points(self) -> int:
-        return int(self.points_local.shape[0])
+        return self.index.n_points
+
+    @property
+    def points_local(self) -> Float[Array, "n 3"]:
+        """The stored points relative to `origin` (metres, the field's dtype)."""
+        return self.index.points
+
+    @property
+    def tolerance(self) -> Float[Array, ""]:
+        """The match distance (metres)."""
+        return self.index.tolerance
 
     def sample_local(self, points):
         """Sampled velocity (m/s) at local points matching a stored point, NaN elsewhere."""
         points = jnp.asarray(points).astype(self.dtype)
-        key = jnp.asarray(_KEY, self.dtype)
-        p = points @ key
-        # compare_all: O(queries x points) comparisons but the quickest to compile; the
-        # points of one mount number a few hundred to a few thousand
-        method = "compare_all" if self.n_points <= 4096 else "scan"
-        start = jnp.searchsorted(self.projection, p - self.tolerance, side="left", method=method)
-        idx = jnp.clip(start[..., None] + jnp.arange(self.window), 0, self.n_points - 1)
-        cand = self.order[idx]  # (..., window)
-        d2 = jnp.sum((self.points_local[cand] - points[..., None, :]) ** 2, axis=-1)
-        k = jnp.argmin(d2, axis=-1)
-        best = jnp.take_along_axis(cand, k[..., None], axis=-1)[..., 0]
-        dmin = jnp.take_along_axis(d2, k[..., None], axis=-1)[..., 0]
+        best, hit = self.index.match(points)
         v = self.velocity[best]
-        ok = (dmin <= self.tolerance**2) & jnp.all(jnp.isfinite(v), axis=-1)
+        ok = hit & jnp.all(jnp.isfinite(v), axis=-1)
         return jnp.where(ok[..., None], jnp.where(ok[..., None], v, 0), jnp.nan)
 
 
