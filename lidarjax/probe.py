@@ -902,7 +902,6 @@ def _gates_los(field, origin_local, directions, ranges, probe, rule, los=None, w
     # beam (the 10-minute PPI series of benchmarks/scanning.py 3x faster). The near gates,
     # whose nodes the cut can drop, sample their own nodes, so the convolution stays the
     # samples' one reader. On an accelerator, one index gather (as measured on the H100).
-    window = np.arange(g)[:, None] * m + np.arange(2 * half + 1)[None, :]  # (g, q)
     offsets = (jnp.arange(2 * half + 1, dtype=dtype) - half) * h  # (q,)
     ahead = jnp.abs(offsets) < ranges[:, None]  # (g, q)
     phi = probe.weight(offsets).astype(dtype)  # (q,)
@@ -913,6 +912,7 @@ def _gates_los(field, origin_local, directions, ranges, probe, rule, los=None, w
     # the first ``J // m + 1`` can lose nodes to the cut at the lidar
     k0 = g if windows == "gather" else min(g, half // m + 1)
     if k0 == g:
+        window = np.arange(g)[:, None] * m + np.arange(2 * half + 1)[None, :]  # (g, q)
         los_q = fine_los[..., window]  # (..., b, g, q)
     else:  # the near gates sample their own nodes: the convolution is the samples' one reader
         near = (ranges[:k0, None] + offsets).reshape(-1)  # (k0 q,)
