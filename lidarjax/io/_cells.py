@@ -219,6 +219,11 @@ class CellPointSampler:
     def n_cells(self) -> int:
         return int(self.cell_centre.shape[0])
 
+    def with_values(self, cell_value: np.ndarray, point_value: np.ndarray) -> CellPointSampler:
+        """The same interpolant of other values on the same cells and points (a
+        `PointValues` recipe's output)."""
+        return dataclasses.replace(self, cell_value=cell_value, point_value=point_value)
+
     # -- evaluation ------------------------------------------------------------------
     def _bary(self, tets: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Barycentric weights `(n, 4)` (cell centre, base, A, B) of points `q` in `tets`."""
@@ -316,12 +321,46 @@ class CellPointSampler:
         each tetrahedron onto the nodes inside its bounding box. Returns also the number of
         point-in-tet tests made. Uses a numba kernel when numba is installed (the `openfoam`
         extra), else the same computation vectorised in numpy (several times slower)."""
+        return self._scatter(axes, use_numba, locations=False)
+
+    def grid_locations(self, axes: list[np.ndarray], use_numba: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The tetrahedron holding each node of a tensor grid, `(nx, ny, nz)` (-1 in no cell),
+        and its barycentric weights `(nx, ny, nz, 4)` (cell centre, base, A, B), as
+        `sample_grid` finds them: `values_at` of them is `sample_grid` for any values on the
+        same mesh (a snapshot sequence locates its grid once)."""
+        return self._scatter(axes, use_numba, locations=True)
+
+    def values_at(self, tets: np.ndarray, weights: np.ndarray, use_numba: bool = True) -> np.ndarray:
+        """Values `(..., 3)` at located points (`grid_locations` or `locate`), NaN where the
+        tetrahedron is -1 (a numba loop when numba is installed, else numpy)."""
+        tets = np.asarray(tets)
+        out = np.full(tets.shape + (3,), np.nan)
+        kernel = _mix_kernel() if use_numba else None
+        if kernel is not None:
+            kernel(tets.reshape(-1), np.ascontiguousarray(weights).reshape(-1, 4), self.tet_cell,
+                   self.tet_pts, self.cell_value, self.point_value, out.reshape(-1, 3))
+            return out
+        found = tets >= 0
+        t, w = tets[found], weights[found]
+        cells = self.tet_cell[t]
+        out[found] = (w[:, 0:1] * self.cell_value[cells] + w[:, 1:2] * self.point_value[self.tet_pts[t, 0]]
+                      + w[:, 2:3] * self.point_value[self.tet_pts[t, 1]]
+                      + w[:, 3:4] * self.point_value[self.tet_pts[t, 2]])
+        return out
+
+    def _scatter(self, axes, use_numba, *, locations: bool):
         shape = tuple(a.size for a in axes)
-        out = np.full((*shape, 3), np.nan)
-        flat = out.reshape(-1, 3)
+        if locations:
+            tet_out = np.full(shape, -1, np.int64)
+            w_out = np.full((*shape, 4), np.nan)
+            done = (tet_out, w_out)
+        else:
+            out = np.full((*shape, 3), np.nan)
+            done = (out, 0)
         tets_all = np.flatnonzero(self.tet_ok)
         if tets_all.size == 0:
-            return out, 0
+            return done
         # bounding boxes of the tets
         verts = [self.cell_centre[self.tet_cell[tets_all]]] + [
             self.point_xyz[self.tet_pts[tets_all, k]] for k in range(3)]
@@ -337,13 +376,18 @@ class CellPointSampler:
         keep = n_cand > 0
         tets_all, i0, span, n_cand = tets_all[keep], i0[keep], span[keep], n_cand[keep]
         tests = int(n_cand.sum())
-        kernel = _grid_kernel() if use_numba else None
+        kernel = _grid_kernel(locations) if use_numba else None
         if kernel is not None:
+            centre = self.cell_centre[self.tet_cell[tets_all]]
+            inv = np.ascontiguousarray(self.tet_inv[tets_all])
+            if locations:
+                kernel(centre, inv, tets_all, i0, i0 + span, axes[0], axes[1], axes[2], tet_out, w_out)
+                return done
             vc = self.cell_value[self.tet_cell[tets_all]]
             vp = np.stack([self.point_value[self.tet_pts[tets_all, k]] for k in range(3)], axis=1)
-            kernel(self.cell_centre[self.tet_cell[tets_all]], np.ascontiguousarray(self.tet_inv[tets_all]),
-                   vc, vp, i0, i0 + span, axes[0], axes[1], axes[2], out)
+            kernel(centre, inv, vc, vp, i0, i0 + span, axes[0], axes[1], axes[2], out)
             return out, tests
+        flat = (tet_out.reshape(-1), w_out.reshape(-1, 4)) if locations else out.reshape(-1, 3)
         csum = np.cumsum(n_cand)
         budget = _CHUNK * 2
         start = 0
@@ -364,9 +408,13 @@ class CellPointSampler:
             w = self._bary(tets, q)
             inside = (w >= -_INSIDE_TOL).all(axis=1)
             node = (ii * shape[1] + jj) * shape[2] + kk
-            flat[node[inside]] = self._combine(tets[inside], w[inside])
+            if locations:
+                flat[0][node[inside]] = tets[inside]
+                flat[1][node[inside]] = w[inside]
+            else:
+                flat[node[inside]] = self._combine(tets[inside], w[inside])
             start = stop
-        return out, tests
+        return done if locations else (out, tests)
 
 
 def boundary_face_values(
@@ -395,6 +443,47 @@ def boundary_face_values(
     return vals, proper
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class PointValues:
+    """How `build_sampler` forms the values its sampler holds from a field on the same mesh:
+    the region cells' values and `volPointInterpolation`'s point values (inverse-distance
+    weights to the cell centres around interior points, to the proper patch faces' centres
+    around patch points), everything geometric kept. `sampler.with_values(*recipe(values,
+    boundary))` is `build_sampler` of those values, without the geometry (a snapshot
+    sequence builds it once)."""
+
+    mesh: PolyMesh
+    ring_cells: np.ndarray
+    sub_cells: np.ndarray
+    pair_point: np.ndarray
+    pair_cell: np.ndarray
+    pair_weight: np.ndarray
+    bfaces: np.ndarray
+    bface_area: np.ndarray
+    patch_point: np.ndarray
+    patch_face: np.ndarray
+    patch_weight: np.ndarray
+    wsum: np.ndarray
+
+    def __call__(self, cell_value: np.ndarray, boundary: BoundaryValues) -> tuple[np.ndarray, np.ndarray]:
+        """``(cell values (nc, 3), point values (np, 3))`` of the sampler's cells and points."""
+        cell_value = np.asarray(cell_value, np.float64)
+        cv = cell_value[self.ring_cells]
+        n = self.wsum.size
+        vsum = np.zeros((n, 3))
+        for a in range(3):
+            vsum[:, a] += np.bincount(self.pair_point, weights=self.pair_weight * cv[self.pair_cell, a],
+                                      minlength=n)
+        bvals, _ = boundary_face_values(self.mesh, self.bfaces, self.bface_area,
+                                        cell_value[self.mesh.owner[self.bfaces]], boundary)
+        for a in range(3):
+            vsum[:, a] += np.bincount(self.patch_point, weights=self.patch_weight * bvals[self.patch_face, a],
+                                      minlength=n)
+        pval = vsum / np.where(self.wsum > 0, self.wsum, 1.0)[:, None]
+        pval[self.wsum <= 0] = np.nan
+        return cv[self.sub_cells], pval
+
+
 def build_sampler(
     mesh: PolyMesh, cell_value: np.ndarray, boundary: BoundaryValues, region_cells: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
@@ -403,6 +492,15 @@ def build_sampler(
 
     Reads only what those cells need: their points, the cells around those points (for the
     point values), and those cells' faces (for their centres)."""
+    return build_sampler_and_values(mesh, cell_value, boundary, region_cells, bounds)[0]
+
+
+def build_sampler_and_values(
+    mesh: PolyMesh, cell_value: np.ndarray, boundary: BoundaryValues, region_cells: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[CellPointSampler, PointValues]:
+    """`build_sampler` and the `PointValues` recipe that refills it with another field's
+    values on the same mesh."""
     nc_all = mesh.n_cells
     in_region = np.zeros(nc_all, bool)
     in_region[region_cells] = True
@@ -428,7 +526,6 @@ def build_sampler(
     internal = gfaces < mesh.n_internal
     nei_l[internal] = cell_local[mesh.neighbour[gfaces[internal]]]
     cc = cell_centres(fctr, farea, own_l, nei_l, ring_cells.size)
-    cv = np.asarray(cell_value, np.float64)[ring_cells]
     face_pos = np.full(mesh.n_faces, -1, np.int64)
     face_pos[gfaces] = np.arange(gfaces.size)
 
@@ -454,7 +551,7 @@ def build_sampler(
     # boundary faces among those touching the region points
     bsel = ~ti_mask
     bfaces = tfaces[bsel]
-    bvals, bproper = boundary_face_values(
+    _, bproper = boundary_face_values(
         mesh, bfaces, farea[face_pos[bfaces]], cell_value[mesh.owner[bfaces]], boundary)
     b_ctr = fctr[face_pos[bfaces]]
     bflat, boffs, _ = _gather_face_points(mesh, bfaces)
@@ -466,21 +563,14 @@ def build_sampler(
     is_patch[bp[bproper_rep]] = True
     # interior points: inverse distance to the cell centres
     wsum = np.zeros(pts.size)
-    vsum = np.zeros((pts.size, 3))
     sel = ~is_patch[pp]
-    w = 1.0 / np.linalg.norm(pxyz[pp[sel]] - cc[pc[sel]], axis=1)
-    wsum += np.bincount(pp[sel], weights=w, minlength=pts.size)
-    for a in range(3):
-        vsum[:, a] += np.bincount(pp[sel], weights=w * cv[pc[sel], a], minlength=pts.size)
+    w_int = 1.0 / np.linalg.norm(pxyz[pp[sel]] - cc[pc[sel]], axis=1)
+    wsum += np.bincount(pp[sel], weights=w_int, minlength=pts.size)
     # patch points: inverse distance to the proper patch faces' centres, face values
     bpp = bp[bproper_rep]
     bff = bface_rep[bproper_rep]
-    w = 1.0 / np.linalg.norm(pxyz[bpp] - b_ctr[bff], axis=1)
-    wsum += np.bincount(bpp, weights=w, minlength=pts.size)
-    for a in range(3):
-        vsum[:, a] += np.bincount(bpp, weights=w * bvals[bff, a], minlength=pts.size)
-    pval = vsum / np.where(wsum > 0, wsum, 1.0)[:, None]
-    pval[wsum <= 0] = np.nan
+    w_b = 1.0 / np.linalg.norm(pxyz[bpp] - b_ctr[bff], axis=1)
+    wsum += np.bincount(bpp, weights=w_b, minlength=pts.size)
 
     # ---- tetrahedra of the region cells ---------------------------------------------
     sub_cells = cell_local[region_cells]
@@ -532,12 +622,18 @@ def build_sampler(
         for k in range(3):
             np.minimum.at(clo, tet_cell, pxyz[tet_pts[:, k]])
             np.maximum.at(chi, tet_cell, pxyz[tet_pts[:, k]])
-    return CellPointSampler(
-        cell_centre=rcc, cell_value=cv[sub_cells], cell_size=chi - clo, cell_lo=clo, cell_hi=chi,
-        point_xyz=pxyz, point_value=pval, tet_cell=tet_cell, tet_pts=tet_pts, tet_inv=inv,
+    values = PointValues(mesh=mesh, ring_cells=ring_cells, sub_cells=sub_cells, pair_point=pp[sel],
+                         pair_cell=pc[sel], pair_weight=w_int, bfaces=bfaces,
+                         bface_area=farea[face_pos[bfaces]], patch_point=bpp, patch_face=bff,
+                         patch_weight=w_b, wsum=wsum)
+    cell_v, point_v = values(cell_value, boundary)
+    sampler = CellPointSampler(
+        cell_centre=rcc, cell_value=cell_v, cell_size=chi - clo, cell_lo=clo, cell_hi=chi,
+        point_xyz=pxyz, point_value=point_v, tet_cell=tet_cell, tet_pts=tet_pts, tet_inv=inv,
         tet_ok=tet_ok, cell_tet_offsets=cto, n_cells_total=nc_all,
         n_boundary_points=int(is_patch.sum()),
     )
+    return sampler, values
 
 
 def _inverse3(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -630,12 +726,68 @@ def _fan_ok(mesh, flat, offs, sizes, base, own_c, nei_c) -> np.ndarray:
 
 
 @functools.cache
-def _grid_kernel():
-    """The numba-compiled tet-to-grid scatter, or None without numba."""
+def _mix_kernel():
+    """The numba-compiled barycentric mix of located points' tetrahedra (`values_at`), or
+    None without numba."""
     try:
         import numba
     except ImportError:
         return None
+
+    @numba.njit(cache=True, nogil=True)
+    def mix(tets, w, tet_cell, tet_pts, cv, pv, out):  # pragma: no cover - compiled
+        for n in range(tets.shape[0]):
+            t = tets[n]
+            if t < 0:
+                continue
+            c = tet_cell[t]
+            p0, p1, p2 = tet_pts[t, 0], tet_pts[t, 1], tet_pts[t, 2]
+            for a in range(3):
+                out[n, a] = (w[n, 0] * cv[c, a] + w[n, 1] * pv[p0, a] + w[n, 2] * pv[p1, a]
+                             + w[n, 3] * pv[p2, a])
+
+    return mix
+
+
+@functools.cache
+def _grid_kernel(locations: bool = False):
+    """The numba-compiled tet-to-grid scatter (values, or with `locations` the tet and its
+    barycentric weights per node), or None without numba."""
+    try:
+        import numba
+    except ImportError:
+        return None
+
+    if locations:
+        @numba.njit(cache=True, nogil=True)
+        def locate(centre, inv, tet_id, i0, i1, ax, ay, az, tet_out, w_out):  # pragma: no cover
+            tol = _INSIDE_TOL
+            for t in range(centre.shape[0]):
+                for i in range(i0[t, 0], i1[t, 0]):
+                    rx = ax[i] - centre[t, 0]
+                    for j in range(i0[t, 1], i1[t, 1]):
+                        ry = ay[j] - centre[t, 1]
+                        for k in range(i0[t, 2], i1[t, 2]):
+                            rz = az[k] - centre[t, 2]
+                            l1 = inv[t, 0, 0] * rx + inv[t, 0, 1] * ry + inv[t, 0, 2] * rz
+                            if l1 < -tol:
+                                continue
+                            l2 = inv[t, 1, 0] * rx + inv[t, 1, 1] * ry + inv[t, 1, 2] * rz
+                            if l2 < -tol:
+                                continue
+                            l3 = inv[t, 2, 0] * rx + inv[t, 2, 1] * ry + inv[t, 2, 2] * rz
+                            if l3 < -tol:
+                                continue
+                            l0 = 1.0 - l1 - l2 - l3
+                            if l0 < -tol:
+                                continue
+                            tet_out[i, j, k] = tet_id[t]
+                            w_out[i, j, k, 0] = l0
+                            w_out[i, j, k, 1] = l1
+                            w_out[i, j, k, 2] = l2
+                            w_out[i, j, k, 3] = l3
+
+        return locate
 
     @numba.njit(cache=True, nogil=True)
     def kernel(centre, inv, vc, vp, i0, i1, ax, ay, az, out):  # pragma: no cover - compiled

@@ -30,6 +30,7 @@ import numpy as np
 
 from .._util import PathLike, import_optional
 from ..field import FieldSequence, GridField
+from ._cells import build_sampler_and_values
 from .fields import FieldArrays, FieldLoadReport, _crop_arrays, _region_box, load_field
 from .openfoam import (
     OpenFOAMField,
@@ -79,6 +80,7 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
     axes: list[np.ndarray] = []
     cells: list[np.ndarray] = []
     bounds: list[Any] = []
+    prepared: list[Any] = []  # (sampler, its PointValues, the grid nodes' tets and weights)
 
     def load(k: int) -> GridField:
         if decomposed:
@@ -88,7 +90,9 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
             of = OpenFOAMField(case=p, time=names[k], field=field, mesh=mesh,
                                cell_values=values, boundary=boundary)
         # the first snapshot fixes the nodes (and the cells around them); every later one is
-        # sampled by cellPoint at the same nodes
+        # sampled by cellPoint at the same nodes. The mesh is the same in every snapshot, so
+        # the cells' tetrahedra, the point-value weights and each node's tetrahedron are
+        # found once (at the second snapshot) and every later snapshot only mixes its values
         if not axes:
             grid, velocity, _ = resample_openfoam(of, region, spacing, check_points=0)
             axes.extend(grid)
@@ -96,10 +100,14 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
             lo, hi = np.array([a[0] for a in grid]), np.array([a[-1] for a in grid])
             pad = np.maximum(1e-6 * np.maximum(np.abs(lo), np.abs(hi)), 1e-9)
             cells.append(np.flatnonzero(((chi >= lo - pad) & (clo <= hi + pad)).all(axis=1)))
+        elif not prepared:
+            sampler, refill = build_sampler_and_values(of.mesh, of.cell_values, of.boundary, cells[0],
+                                                       bounds[0])
+            prepared.extend((sampler, refill, sampler.grid_locations(axes)))
+            velocity = sampler.values_at(*prepared[2])
         else:
-            if not decomposed:  # the mesh's cell bounds, computed once
-                object.__setattr__(of, "_bounds", bounds[0])
-            velocity, _ = of.sampler(cells[0]).sample_grid(axes)
+            sampler, refill, located = prepared
+            velocity = sampler.with_values(*refill(of.cell_values, of.boundary)).values_at(*located)
         if not bounds:
             bounds.append(of.bounds)
         grid = axes
