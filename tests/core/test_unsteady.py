@@ -64,21 +64,31 @@ def linear_snapshots():
 SCAN, MOUNT = lj.windcube_v2(), lj.Mount([0.0, 0.0, 0.0])
 
 
+@jax.jit
+def _sample_at(field, points, times):
+    """`field.sample_local_at`, compiled (eagerly, each of its operations compiles alone)."""
+    return field.sample_local_at(points, times)
+
+
 def test_sampling_is_exact_for_a_flow_linear_in_space_and_time(linear_snapshots):
     f = linear_snapshots
     rng = np.random.default_rng(3)
     p = rng.uniform([-100, -100, 5], [100, 100, 110], (50, 3))
     t = rng.uniform(0.0, 60.0, 50)
-    got = np.asarray(f.sample_local_at(jnp.asarray(p) - f.origin, t))
-    np.testing.assert_allclose(got, linear_u(p, t), rtol=0, atol=1e-12)
+    # one call: the 50 points, three of them outside the snapshots' span or inside it again,
+    # and a point outside the grid (NaN outside the span or the grid)
+    pts = np.concatenate([p, p[:3], [[500.0, 0, 50]]])
+    times = np.concatenate([t, [-0.1, 60.5, 30.0], [3.0]])
+    got = np.asarray(_sample_at(f, jnp.asarray(pts) - f.origin, jnp.asarray(times)))
+    np.testing.assert_allclose(got[:50], linear_u(p, t), rtol=0, atol=1e-12)
     d = rng.normal(size=(50, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    los = np.asarray(f.los_local_at(jnp.asarray(p) - f.origin, d, t))
+    los = np.asarray(jax.jit(lambda f, p, d, t: f.los_local_at(p, d, t))(
+        f, jnp.asarray(p) - f.origin, jnp.asarray(d), jnp.asarray(t)))
     np.testing.assert_allclose(los, np.sum(linear_u(p, t) * d, axis=1), atol=1e-12)
-    # outside the snapshots' span, or outside the grid: NaN
-    out = np.asarray(f.sample_local_at(jnp.asarray(p[:3]) - f.origin, [-0.1, 60.5, 30.0]))
+    out = got[50:53]
     assert np.isnan(out[:2]).all() and np.isfinite(out[2]).all()
-    assert np.isnan(np.asarray(f.sample_local_at(jnp.array([[500.0, 0, 50]]) - f.origin, 3.0))).all()
+    assert np.isnan(got[53]).all()
 
 
 def test_linear_interpolation_in_time_converges_at_second_order():
@@ -97,7 +107,7 @@ def test_linear_interpolation_in_time_converges_at_second_order():
     for dt in (2.0, 1.0):
         ts = np.arange(0.0, 30.0 + 1e-9, dt)
         f = lj.SnapshotField(ts, [grid_at(wave, t) for t in ts])
-        got = np.asarray(f.sample_local_at(jnp.asarray(p) - f.origin, t_q[:, None]))[:, 0, 0]
+        got = np.asarray(_sample_at(f, jnp.asarray(p) - f.origin, jnp.asarray(t_q[:, None])))[:, 0, 0]
         err = np.abs(got - (8.0 + a * np.sin(w * t_q))).max()
         assert err <= a * w**2 * dt**2 / 8 * (1 + 1e-9)
         errs.append(err)
