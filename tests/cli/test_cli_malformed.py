@@ -542,9 +542,14 @@ def test_simulate_writes_flags_and_explains_nan(case, capsys):
 # signals: the only subprocess tests
 
 _SLOW_WRITER = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
     import numpy as np
     import lidarjax.workflows.records as r
+
+    # Ctrl-C as in a terminal: a shell that starts the test suite in the background starts it
+    # with SIGINT ignored, which the child inherits (it then slept its 60 s and the test
+    # timed out)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
     def fake_correct(table, path, *, records=None, **kw):  # no compilation: about the writer
         z = np.zeros(records.speed.shape)
