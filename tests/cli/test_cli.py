@@ -144,21 +144,3 @@ def test_correct_rejects_mismatched_heights(seed_case, table_path, capsys):
     assert main(["correct", "--table", str(table_path), "--records",
                  str(seed_case / "bad.sta"), "--quiet"]) == 2
     assert "heights" in capsys.readouterr().err
-
-
-def test_demo_runs_end_to_end(tmp_path, capsys):
-    pytest.importorskip("matplotlib")
-    assert main(["demo", "--out", str(tmp_path / "demo")]) == 0
-    text = capsys.readouterr().out
-    assert "C_U = U / U_free" in text and "corrected" in text
-    for name in ("seed/settings.dat", "seed/windcube simulation 330 degrees.dat", "table.npz",
-                 "synthetic.sta", "synthetic_corrected.csv", "plots/profiles.png",
-                 "plots/los_fit.png", "plots/roses.png", "plots/sensitivity.png", "summary.json"):
-        assert (tmp_path / "demo" / name).is_file(), name
-    import json
-
-    summary = json.loads((tmp_path / "demo" / "summary.json").read_text())["records"]
-    assert summary["converged_fraction"] > 0.99
-    # the correction removes the platform's distortion: what is left is the LOS noise
-    assert summary["speed_rms_corrected"] < 0.5 * summary["speed_rms_uncorrected"]
-    assert abs(summary["speed_bias_corrected"]) < 0.01
