@@ -24,3 +24,55 @@ def site_records():
 
     rng = np.random.default_rng(3)
     return sites.records(rng.uniform(0.0, 360.0, 48), rng.uniform(3.0, 15.0, 48))
+
+
+# Seconds the slowest test files took in a full run (`--junitxml`, summed per file) on a loaded
+# 2-core machine: relative weights. With `--dist loadfile --no-loadscope-reorder`
+# (pyproject.toml) xdist hands the files out in collection order: these go first, longest
+# first, so that the two workers finish together instead of one of them starting a long
+# file at the end. A file not listed keeps its place after them; a stale number only costs
+# balance, never a test.
+SLOW_FILES = {
+    "tests/core/test_inverse.py": 352,
+    "tests/scenes/test_farm.py": 184,
+    "tests/core/test_batch.py": 174,
+    "tests/io/test_openfoam_exact.py": 159,
+    "tests/scenes/test_turbulence.py": 157,
+    "tests/core/test_sensitivity.py": 143,
+    "tests/core/test_joint.py": 137,
+    "tests/core/test_forward.py": 127,
+    "tests/core/test_probe.py": 112,
+    "tests/cli/test_cli_malformed.py": 103,
+    "tests/cli/test_farm.py": 103,
+    "tests/core/test_fused_arithmetic.py": 101,
+    "tests/cli/test_demo.py": 95,
+    "tests/core/test_stability_forward.py": 95,
+    "tests/core/test_series.py": 94,
+    "tests/workflows/test_farm_study.py": 92,
+    "tests/cli/test_scanning_cli.py": 91,
+    "tests/core/test_scanning_nodes.py": 87,
+    "tests/workflows/test_seed_tables.py": 86,
+    "tests/core/test_mount.py": 82,
+    "tests/core/test_scanning.py": 76,
+    "tests/io/test_cellpoint_field.py": 68,
+    "tests/cli/test_calibrate.py": 62,
+    "tests/core/test_response.py": 60,
+    "tests/core/test_unsteady.py": 60,
+    "tests/core/test_six_beam.py": 56,
+    "tests/workflows/test_sensitivity_report.py": 52,
+    "tests/core/test_field.py": 51,
+    "tests/cli/test_cli.py": 49,
+    "tests/core/test_spectral.py": 48,
+    "tests/core/test_scanning_reconstruct.py": 39,
+    "tests/cli/test_series.py": 35,
+    "tests/cli/test_sensitivity.py": 34,
+    "tests/core/test_calibrate.py": 33,
+    "tests/scenes/test_analytic.py": 32,
+    "tests/workflows/test_monitor_points.py": 31,
+    "tests/core/test_precision.py": 31,
+}
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {f: k for k, f in enumerate(sorted(SLOW_FILES, key=SLOW_FILES.get, reverse=True))}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))  # stable
