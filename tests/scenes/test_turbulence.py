@@ -290,7 +290,7 @@ def test_time_sampler_lines_built_in_chunks(monkeypatch):
     vec = eqx.filter_jit(lambda f, p, t: f.time_sampler(p, n_times=1000)(t))(f, pts, ts)
     np.testing.assert_allclose(vec, sample_at(f, jnp.broadcast_to(pts, (3, 3, 5, 3)),
                                               jnp.broadcast_to(ts, (3, 3, 5))), atol=1e-12)
-    g = jax.grad(lambda s: jnp.sum(f.time_sampler(pts * s, dirn, n_times=1000)(ts)))(1.0)
+    g = jax.jit(jax.grad(lambda s: jnp.sum(f.time_sampler(pts * s, dirn, n_times=1000)(ts))))(1.0)
     assert np.isfinite(float(g))
 
 
