@@ -228,10 +228,13 @@ def test_gradients_through_a_batched_mount_equal_the_single_mount_ones():
         m = lj.Mount([12.0, -7.0, 31.0], beta=beta, psi=180.0, pitch=pitch)
         return jnp.sum(lj.simulate(HILL, scan, m, HEIGHTS).lidar_speed)
 
-    g_beta, g_pitch = jax.grad(total, argnums=(0, 1))(jnp.asarray(ROT_BETAS), jnp.asarray(ROT_PITCH))
+    # each gradient one compiled function (eagerly, the inner jit compiles a forward pass and
+    # its transpose)
+    g_beta, g_pitch = jax.jit(jax.grad(total, argnums=(0, 1)))(jnp.asarray(ROT_BETAS),
+                                                               jnp.asarray(ROT_PITCH))
     assert np.all(np.isfinite(g_beta)) and np.all(np.isfinite(g_pitch))
     assert np.all(g_beta != 0) and np.all(g_pitch != 0)
-    grad_one = jax.grad(single, argnums=(0, 1))
+    grad_one = jax.jit(jax.grad(single, argnums=(0, 1)))
     for k in range(4):
         gb, gp = grad_one(jnp.asarray(ROT_BETAS[k]), jnp.asarray(ROT_PITCH[k]))
         np.testing.assert_allclose(g_beta[k], gb, rtol=1e-12, atol=1e-15)
