@@ -135,7 +135,7 @@ def test_los_gradient_wrt_samples_is_the_probe_weight(case):
         object.__setattr__(f, "velocity", vel)
         return lj.simulate(f, SCAN, MOUNTS[0], HEIGHTS, probe=probe).los[1, 3]
 
-    g = np.asarray(jax.grad(los)(field.velocity))
+    g = np.asarray(jax.jit(jax.grad(los))(field.velocity))  # one compiled gradient
     sel = (locs.height[rows] == 40.0) & (locs.beam[rows] == 3)
     direction = np.asarray(lj.simulate(SCENE, SCAN, MOUNTS[0], HEIGHTS).directions)[3]
     np.testing.assert_allclose(g[sel], locs.weight[rows][sel][:, None] * direction, atol=1e-12)
