@@ -180,7 +180,8 @@ def test_invert_joint_derivatives_match_finite_differences(table, noisy):
         out = lj.invert_joint(table, x, noise=0.1)
         return jnp.stack([out.speed, out.direction, out.parameter])
 
-    _, tangent = jax.jvp(solve, (jnp.asarray(los[:3]),), (jnp.asarray(v),))
+    _, tangent = jax.jit(lambda x, t: jax.jvp(solve, (x,), (t,)))(jnp.asarray(los[:3]),
+                                                                  jnp.asarray(v))
     # central differences, all in one call of the compiled campaign-shaped solver
     eps = 1e-5
     batch = np.array(los)
