@@ -3,6 +3,7 @@ plain numpy (tests/_campaign.py) from a lidar with known north offset and tilt e
 
 from types import SimpleNamespace
 
+import jax
 import numpy as np
 import pytest
 
@@ -107,17 +108,18 @@ def test_calibration_model_jacobians_match_central_differences(table, with_refer
     ctx = ((sp.start, sp.offsets, sp.widths, sp.uniform), sp.coefficients,
            table.beam_velocity_spline.coefficients, "beam", table.beam_vectors,
            np.array([EPS0, 0.0, 0.0]))
-    model, jb, jt = _model_and_jacobian(beta, theta, ref_dir, hidx, ctx)
+    # compiled once for the model, its Jacobians and every difference (eagerly, each call
+    # dispatched its operations one by one)
+    model_jac = jax.jit(lambda b, t: _model_and_jacobian(b, t, ref_dir, hidx, ctx))
+    model, jb, jt = model_jac(beta, theta)
     eps = 1e-6
     for k in range(beta.shape[1]):
         e = np.zeros_like(beta)
         e[:, k] = eps
-        fd = (_model_and_jacobian(beta + e, theta, ref_dir, hidx, ctx)[0]
-              - _model_and_jacobian(beta - e, theta, ref_dir, hidx, ctx)[0]) / (2 * eps)
+        fd = (model_jac(beta + e, theta)[0] - model_jac(beta - e, theta)[0]) / (2 * eps)
         np.testing.assert_allclose(jb[..., k], fd, rtol=1e-6, atol=1e-7)
     for k in range(3):
         e = np.zeros(3)
         e[k] = eps
-        fd = (_model_and_jacobian(beta, theta + e, ref_dir, hidx, ctx)[0]
-              - _model_and_jacobian(beta, theta - e, ref_dir, hidx, ctx)[0]) / (2 * eps)
+        fd = (model_jac(beta, theta + e)[0] - model_jac(beta, theta - e)[0]) / (2 * eps)
         np.testing.assert_allclose(jt[..., k], fd, rtol=1e-6, atol=1e-7)
