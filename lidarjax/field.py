@@ -269,6 +269,27 @@ class PointIndex(eqx.Module):
         dmin = jnp.take_along_axis(d2, k[..., None], axis=-1)[..., 0]
         return best, dmin <= self.tolerance**2
 
+
+class IndexedPoints:
+    """The accessors of a field answering at prepared points held as `index` (a
+    `PointIndex`): `n_points`, `points_local` (metres from the field's origin, its dtype)
+    and `tolerance` (metres)."""
+
+    @property
+    def n_points(self) -> int:
+        """Number of prepared points."""
+        return self.index.n_points
+
+    @property
+    def points_local(self) -> Float[Array, "n 3"]:
+        """The prepared points relative to the field's origin (metres, its dtype)."""
+        return self.index.points
+
+    @property
+    def tolerance(self) -> Float[Array, ""]:
+        """The match distance (metres)."""
+        return self.index.tolerance
+
 def _check_axis(name: str, values) -> np.ndarray:
     arr = np.asarray(values, dtype=np.float64)
     if arr.ndim != 1:

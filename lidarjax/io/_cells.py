@@ -376,17 +376,19 @@ class CellPointSampler:
         keep = n_cand > 0
         tets_all, i0, span, n_cand = tets_all[keep], i0[keep], span[keep], n_cand[keep]
         tests = int(n_cand.sum())
-        kernel = _grid_kernel(locations) if use_numba else None
+        kernel = _grid_kernel() if use_numba else None
         if kernel is not None:
             centre = self.cell_centre[self.tet_cell[tets_all]]
             inv = np.ascontiguousarray(self.tet_inv[tets_all])
-            if locations:
-                kernel(centre, inv, tets_all, i0, i0 + span, axes[0], axes[1], axes[2], tet_out, w_out)
-                return done
-            vc = self.cell_value[self.tet_cell[tets_all]]
-            vp = np.stack([self.point_value[self.tet_pts[tets_all, k]] for k in range(3)], axis=1)
-            kernel(centre, inv, vc, vp, i0, i0 + span, axes[0], axes[1], axes[2], out)
-            return out, tests
+            if locations:  # the value arrays are not read
+                vc, vp, out = np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros((1, 1, 1, 3))
+            else:
+                vc = self.cell_value[self.tet_cell[tets_all]]
+                vp = np.stack([self.point_value[self.tet_pts[tets_all, k]] for k in range(3)], axis=1)
+                tet_out, w_out = np.zeros((1, 1, 1), np.int64), np.zeros((1, 1, 1, 4))
+            kernel(centre, inv, tets_all, vc, vp, i0, i0 + span, axes[0], axes[1], axes[2], out,
+                   tet_out, w_out, locations)
+            return done if locations else (out, tests)
         flat = (tet_out.reshape(-1), w_out.reshape(-1, 4)) if locations else out.reshape(-1, 3)
         csum = np.cumsum(n_cand)
         budget = _CHUNK * 2
@@ -750,47 +752,18 @@ def _mix_kernel():
 
 
 @functools.cache
-def _grid_kernel(locations: bool = False):
-    """The numba-compiled tet-to-grid scatter (values, or with `locations` the tet and its
-    barycentric weights per node), or None without numba."""
+def _grid_kernel():
+    """The numba-compiled tet-to-grid scatter, or None without numba: for every node inside
+    a tetrahedron, its values (`out`), or with `locations` the tetrahedron's number and the
+    barycentric weights (`tet_out`, `w_out`); the arrays not written may be dummies."""
     try:
         import numba
     except ImportError:
         return None
 
-    if locations:
-        @numba.njit(cache=True, nogil=True)
-        def locate(centre, inv, tet_id, i0, i1, ax, ay, az, tet_out, w_out):  # pragma: no cover
-            tol = _INSIDE_TOL
-            for t in range(centre.shape[0]):
-                for i in range(i0[t, 0], i1[t, 0]):
-                    rx = ax[i] - centre[t, 0]
-                    for j in range(i0[t, 1], i1[t, 1]):
-                        ry = ay[j] - centre[t, 1]
-                        for k in range(i0[t, 2], i1[t, 2]):
-                            rz = az[k] - centre[t, 2]
-                            l1 = inv[t, 0, 0] * rx + inv[t, 0, 1] * ry + inv[t, 0, 2] * rz
-                            if l1 < -tol:
-                                continue
-                            l2 = inv[t, 1, 0] * rx + inv[t, 1, 1] * ry + inv[t, 1, 2] * rz
-                            if l2 < -tol:
-                                continue
-                            l3 = inv[t, 2, 0] * rx + inv[t, 2, 1] * ry + inv[t, 2, 2] * rz
-                            if l3 < -tol:
-                                continue
-                            l0 = 1.0 - l1 - l2 - l3
-                            if l0 < -tol:
-                                continue
-                            tet_out[i, j, k] = tet_id[t]
-                            w_out[i, j, k, 0] = l0
-                            w_out[i, j, k, 1] = l1
-                            w_out[i, j, k, 2] = l2
-                            w_out[i, j, k, 3] = l3
-
-        return locate
-
     @numba.njit(cache=True, nogil=True)
-    def kernel(centre, inv, vc, vp, i0, i1, ax, ay, az, out):  # pragma: no cover - compiled
+    def kernel(centre, inv, tet_id, vc, vp, i0, i1, ax, ay, az, out, tet_out, w_out,
+               locations):  # pragma: no cover - compiled
         tol = _INSIDE_TOL
         for t in range(centre.shape[0]):
             for i in range(i0[t, 0], i1[t, 0]):
@@ -811,8 +784,15 @@ def _grid_kernel(locations: bool = False):
                         l0 = 1.0 - l1 - l2 - l3
                         if l0 < -tol:
                             continue
-                        for c in range(3):
-                            out[i, j, k, c] = (l0 * vc[t, c] + l1 * vp[t, 0, c] + l2 * vp[t, 1, c]
-                                               + l3 * vp[t, 2, c])
+                        if locations:
+                            tet_out[i, j, k] = tet_id[t]
+                            w_out[i, j, k, 0] = l0
+                            w_out[i, j, k, 1] = l1
+                            w_out[i, j, k, 2] = l2
+                            w_out[i, j, k, 3] = l3
+                        else:
+                            for c in range(3):
+                                out[i, j, k, c] = (l0 * vc[t, c] + l1 * vp[t, 0, c]
+                                                   + l2 * vp[t, 1, c] + l3 * vp[t, 2, c])
 
     return kernel

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ..field import AbstractField, GridField, PointIndex
+from ..field import AbstractField, GridField, IndexedPoints, PointIndex
 from ..frames import lidar_to_cfd_rotation, rotate, tilt_rotation
 from ..mount import Mount
 from ..probe import AbstractProbe, PointProbe
@@ -33,7 +33,7 @@ __all__ = ["CellPointField", "cellpoint_field", "simulate_points"]
 
 
 
-class CellPointField(AbstractField):
+class CellPointField(IndexedPoints, AbstractField):
     """A graded `GridField` made exact at prepared points by the mesh's own cellPoint tets.
 
     **Arguments:**
@@ -108,21 +108,6 @@ class CellPointField(AbstractField):
     def resolution(self) -> float | None:
         """The grid's resolution (m): probe nodes are chosen for it, as for the grid alone."""
         return self.grid.resolution
-
-    @property
-    def n_points(self) -> int:
-        """Number of prepared points."""
-        return self.index.n_points
-
-    @property
-    def points_local(self) -> Float[Array, "n 3"]:
-        """The prepared points relative to `origin` (metres, the grid's dtype)."""
-        return self.index.points
-
-    @property
-    def tolerance(self) -> Float[Array, ""]:
-        """The match distance (metres)."""
-        return self.index.tolerance
 
     @property
     def nbytes(self) -> int:

@@ -36,7 +36,7 @@ from jaxtyping import Array, ArrayLike, Float
 from .._precision import default_float, is_concrete, split
 from .._util import format_number
 from ..corrections import DEFAULT_RATIO_TOL
-from ..field import AbstractField, PointIndex
+from ..field import AbstractField, IndexedPoints, PointIndex
 from ..forward import Simulation, simulate
 from ..io.monitor_points import FOCUS_FALLBACK, POINT_REFERENCE, MonitorPoints
 from ..mount import Mount
@@ -193,7 +193,7 @@ def monitor_points(
 
 
 
-class MonitorPointField(AbstractField):
+class MonitorPointField(IndexedPoints, AbstractField):
     """Velocities known at scattered points only: a field that returns the sampled value at
     exactly those points (within `tolerance`) and NaN anywhere else.
 
@@ -246,20 +246,6 @@ class MonitorPointField(AbstractField):
             self.origin, self.origin_lo = split(o64, dtype)
         self.index = PointIndex.build(pts - o64, dtype, tolerance, caller="MonitorPointField")
         self.velocity = vel
-
-    @property
-    def n_points(self) -> int:
-        return self.index.n_points
-
-    @property
-    def points_local(self) -> Float[Array, "n 3"]:
-        """The stored points relative to `origin` (metres, the field's dtype)."""
-        return self.index.points
-
-    @property
-    def tolerance(self) -> Float[Array, ""]:
-        """The match distance (metres)."""
-        return self.index.tolerance
 
     def sample_local(self, points):
         """Sampled velocity (m/s) at local points matching a stored point, NaN elsewhere."""
