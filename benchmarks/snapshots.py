@@ -55,6 +55,7 @@ def measure(case: Path, times: list[str], *, region=None, spacing=None, label: s
     jax.config.update("jax_enable_x64", True)
     from lidarjax.io import load_field_sequence
     from lidarjax.io.openfoam import read_openfoam_field
+    from lidarjax.io.snapshots import cells_covering
 
     t0 = time.perf_counter()
     seq = load_field_sequence(case, region=region, spacing=spacing, max_snapshots=len(times))
@@ -62,10 +63,7 @@ def measure(case: Path, times: list[str], *, region=None, spacing=None, label: s
     total_new = time.perf_counter() - t0
     axes = [np.asarray(a, np.float64) for a in (win.grid.x, win.grid.y, win.grid.z)]
     of0 = read_openfoam_field(case, time=times[0])
-    clo, chi = of0.bounds
-    lo, hi = np.array([a[0] for a in axes]), np.array([a[-1] for a in axes])
-    pad = np.maximum(1e-6 * np.maximum(np.abs(lo), np.abs(hi)), 1e-9)
-    cells = np.flatnonzero(((chi >= lo - pad) & (clo <= hi + pad)).all(axis=1))
+    cells = cells_covering(of0.bounds, axes)  # the cells the sequence samples
     # the sequence's own prepared interpolant (built at its second snapshot)
     from lidarjax.io._cells import build_sampler_and_values
 

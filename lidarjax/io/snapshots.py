@@ -65,6 +65,15 @@ def _time_window(times: np.ndarray, time_range, name: str) -> np.ndarray:
     return keep
 
 
+def cells_covering(bounds, axes) -> np.ndarray:
+    """Global numbers of the cells whose bounding boxes (`OpenFOAMField.bounds`) overlap the
+    grid of `axes` (a relative margin of 1e-6 keeps the nodes on its faces)."""
+    clo, chi = bounds
+    lo, hi = np.array([a[0] for a in axes]), np.array([a[-1] for a in axes])
+    pad = np.maximum(1e-6 * np.maximum(np.abs(lo), np.abs(hi)), 1e-9)
+    return np.flatnonzero(((chi >= lo - pad) & (clo <= hi + pad)).all(axis=1))
+
+
 def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_snapshots):
     p = _case_dir(case)
     name = os.fspath(p)
@@ -96,10 +105,7 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
         if not axes:
             grid, velocity, _ = resample_openfoam(of, region, spacing, check_points=0)
             axes.extend(grid)
-            clo, chi = of.bounds
-            lo, hi = np.array([a[0] for a in grid]), np.array([a[-1] for a in grid])
-            pad = np.maximum(1e-6 * np.maximum(np.abs(lo), np.abs(hi)), 1e-9)
-            cells.append(np.flatnonzero(((chi >= lo - pad) & (clo <= hi + pad)).all(axis=1)))
+            cells.append(cells_covering(of.bounds, grid))
         elif not prepared:
             sampler, refill = build_sampler_and_values(of.mesh, of.cell_values, of.boundary, cells[0],
                                                        bounds[0])

@@ -14,6 +14,7 @@ import pytest
 
 from lidarjax.io import load_field_sequence
 from lidarjax.io.openfoam import read_openfoam_field
+from lidarjax.io.snapshots import cells_covering
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "openfoam_transient" / "case"
 
@@ -29,10 +30,7 @@ def sequence():
 
 
 def _cells(of, axes):
-    clo, chi = of.bounds
-    lo, hi = np.array([a[0] for a in axes]), np.array([a[-1] for a in axes])
-    pad = np.maximum(1e-6 * np.maximum(np.abs(lo), np.abs(hi)), 1e-9)
-    return np.flatnonzero(((chi >= lo - pad) & (clo <= hi + pad)).all(axis=1))
+    return cells_covering(of.bounds, axes)
 
 
 def test_every_snapshot_equals_a_sampler_built_for_it(sequence):
