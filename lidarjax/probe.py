@@ -811,9 +811,7 @@ def _beam_los(field, origin_local, directions, ranges, probe, los=None):
     los_q = los_fn(pts, directions[:, None, :])
     # no light returns from behind the lidar: cut the probe symmetrically at the lidar
     # (|offset| < range, so it stays centred on the focus) and renormalise
-    ahead = jnp.abs(offsets) < ranges[..., None]
-    kept = jnp.where(ahead, weights, 0)
-    total = jnp.sum(kept, axis=-1)
+    ahead, kept, total = _cut(offsets, weights, ranges)
     los = _probe_mean(los_q, jnp.broadcast_to(kept, los_q.shape), jnp.broadcast_to(ahead, los_q.shape))
     if offsets.shape[-1] % 2 == 0:
         # Symmetric nodes of an odd count include the focus (offset 0), which is always
@@ -821,9 +819,22 @@ def _beam_los(field, origin_local, directions, ranges, probe, los=None):
         # innermost offset), the probe's limit is the focus itself.
         focus = los_fn(origin_local + ranges[..., None] * directions, directions)
         los = jnp.where(total <= 0, focus, los)
-    tail = jnp.asarray(getattr(probe, "tail", 0.0)).astype(ranges.dtype)
-    truncated = (1 - total) > tail
-    return los, truncated
+    return los, _truncated(probe, total)
+
+
+def _cut(offsets, weights, ranges):
+    """The probe's symmetric cut at the lidar for nodes at `offsets` ``(..., q)`` around
+    focus ranges ``(...)``: ``(ahead, kept weights, kept total)``, nodes ahead of the lidar
+    (``|offset| < range``) and their weights."""
+    ahead = jnp.abs(offsets) < ranges[..., None]
+    kept = jnp.where(ahead, weights, 0)
+    return ahead, kept, jnp.sum(kept, axis=-1)
+
+
+def _truncated(probe, total):
+    """The cut dropped more than the probe's `tail` of its weighting (`total`: the kept
+    weight of the probe's own rule)."""
+    return (1 - total) > jnp.asarray(getattr(probe, "tail", 0.0)).astype(total.dtype)
 
 
 def shared_gate_rule(probe, ranges) -> tuple[int, int] | None:
@@ -903,9 +914,8 @@ def _gates_los(field, origin_local, directions, ranges, probe, rule, los=None, w
     # whose nodes the cut can drop, sample their own nodes, so the convolution stays the
     # samples' one reader. On an accelerator, one index gather (as measured on the H100).
     offsets = (jnp.arange(2 * half + 1, dtype=dtype) - half) * h  # (q,)
-    ahead = jnp.abs(offsets) < ranges[:, None]  # (g, q)
     phi = probe.weight(offsets).astype(dtype)  # (q,)
-    kept = jnp.where(ahead, phi, 0)
+    ahead, kept, _ = _cut(offsets, phi, ranges)  # (g, q) each
     if windows is None:
         windows = "gather" if is_accelerator() else "convolution"
     # gates beyond ``J h`` keep every node (``r_i >= i m h``, so gates ``i > J / m``); only
@@ -926,10 +936,8 @@ def _gates_los(field, origin_local, directions, ranges, probe, rule, los=None, w
     los = jnp.swapaxes(los, -1, -2)  # (..., g, b)
     # the flag: the weighting's own kept weight at each gate, as `_beam_los` computes it
     off_p, w_p = probe.nodes(ranges)
-    total = jnp.sum(jnp.where(jnp.abs(off_p.astype(dtype)) < ranges[:, None], w_p.astype(dtype), 0),
-                    axis=-1)
-    tail = jnp.asarray(probe.tail).astype(dtype)
-    return los, ((1 - total) > tail)[:, None]
+    total = _cut(off_p.astype(dtype), w_p.astype(dtype), ranges)[2]
+    return los, _truncated(probe, total)[:, None]
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))

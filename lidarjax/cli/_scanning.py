@@ -22,7 +22,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._util import atomic_path
-from ..frames import body_to_cfd_rotation
 from ..io import read_hpl, read_windcube_scan
 from ..probe import CWProbe, PointProbe
 from ..scanning import (
@@ -35,6 +34,7 @@ from ..scanning import (
     stare,
     vad,
 )
+from ..scanning.simulate import host_sub_rays
 from ._common import SCAN_CHOICES, finite_float, positive_float, positive_int
 
 #: The scanning presets (`lidarjax.scanning`).
@@ -215,7 +215,6 @@ def scan_region(pattern, mounts, probe=None) -> tuple[np.ndarray, np.ndarray]:
     else:  # the support covers the nodes at any node count (chosen later for the field)
         reach = np.minimum(np.asarray(probe.support(jnp.asarray(r)), np.float64), r)
         near, far = r - reach, r + reach
-    n_body = np.asarray(pattern.sub_directions(), np.float64).reshape(-1, 3)
     if isinstance(mounts, list | tuple):
         mounts = list(mounts)
     elif mounts.batch_shape:
@@ -224,8 +223,7 @@ def scan_region(pattern, mounts, probe=None) -> tuple[np.ndarray, np.ndarray]:
         mounts = [mounts]
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for mount in mounts:
-        loc = np.asarray(mount.location, np.float64) + np.asarray(mount.location_lo, np.float64)
-        n = n_body @ np.asarray(body_to_cfd_rotation(mount), np.float64).T  # (B, 3)
+        loc, n = host_sub_rays(pattern, mount)  # (3,), (B, 3)
         pts = np.concatenate([(loc + d[:, None, None] * n[None]).reshape(-1, 3)
                               for d in (near, far)])
         lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))

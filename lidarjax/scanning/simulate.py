@@ -155,10 +155,19 @@ def scan_points(field: AbstractField, pattern: ScanPattern, mount: Mount,
     ranges = np.asarray(pattern.ranges, np.float64)
     offsets = gate_nodes(field, pattern, probe, shared_nodes=shared_nodes)[0]
     node_r = np.concatenate([ranges[:, None] + offsets, ranges[:, None]], axis=1)
+    loc, n = host_sub_rays(pattern, mount)
+    return (loc + np.unique(node_r)[:, None, None] * n[None]).reshape(-1, 3)
+
+
+def host_sub_rays(pattern: ScanPattern, mount: Mount) -> tuple[np.ndarray, np.ndarray]:
+    """Host float64 geometry of `pattern`'s sub-rays from one `mount` (concrete numbers):
+    the lidar's location, absolute CFD metres ``(3,)``, and every sub-ray's unit direction in
+    the CFD frame ``(B, 3)`` (``B`` = rays x sub-rays, ray-major, as
+    `ScanPattern.sub_directions`)."""
     rot = np.asarray(body_to_cfd_rotation(mount), np.float64)
     n = np.asarray(pattern.sub_directions(), np.float64).reshape(-1, 3) @ rot.T  # (B, 3)
     loc = np.asarray(mount.location, np.float64) + np.asarray(mount.location_lo, np.float64)
-    return (loc + np.unique(node_r)[:, None, None] * n[None]).reshape(-1, 3)
+    return loc, n
 
 
 def simulate_scan(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
