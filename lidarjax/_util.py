@@ -1,5 +1,6 @@
 """Shared non-public helpers of every layer: errors that name a file, atomic writes, optional
-imports, key normalisation and number formatting.
+imports, key normalisation, number formatting, and `compiled` (small array functions as one
+compiled program).
 
 Nothing here is public API, and nothing here imports the rest of lidarjax: every module, from
 the core to the command line, may use it.
@@ -8,6 +9,7 @@ the core to the command line, may use it.
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib
 import math
 import os
@@ -18,7 +20,9 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import ModuleType
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 __all__: list[str] = []
@@ -26,7 +30,26 @@ __all__: list[str] = []
 PathLike = str | os.PathLike[str]
 
 
-PathLike = str | os.PathLike[str]
+def compiled(fn):
+    """`fn` (a function of arrays, or a method of an `equinox.Module`) compiled as one program
+    per input structure (`equinox.filter_jit`: arrays dynamic, everything else static).
+
+    Called outside `jax.jit`, JAX runs a chain of `jax.numpy` operations one by one and
+    compiles each the first time it meets a shape (20-80 ms apiece on a CPU); a helper of
+    twenty operations then takes a second on its first call. Compiled, it takes one
+    compilation, and inside a trace it is inlined. Positional Python numbers, lists and
+    tuples are made arrays first, so a number is a dynamic input, never a static one that
+    compiles again per value (`jax.jit` takes no lists). Keyword arguments pass as given:
+    use them for static choices."""
+    jitted = eqx.filter_jit(fn)
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        args = tuple(jnp.asarray(a) if isinstance(a, int | float | list | tuple)
+                     and not isinstance(a, bool) else a for a in args)
+        return jitted(*args, **kwargs)
+
+    return call
 
 
 def file_error(path: PathLike, line: int | None, message: str) -> ValueError:

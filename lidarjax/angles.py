@@ -22,6 +22,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ._util import compiled
+
 __all__ = [
     "horizontal_speed",
     "wind_direction",
@@ -46,6 +48,7 @@ def _unit(u, v, calm):
     return su / n, sv / n
 
 
+@compiled
 def horizontal_speed(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     """Horizontal speed ``sqrt(u**2 + v**2)`` in the units of ``velocity`` (m/s).
 
@@ -65,6 +68,7 @@ def horizontal_speed(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     return jnp.where(calm, jnp.zeros_like(u), jnp.sqrt(su * su + sv * sv))
 
 
+@compiled
 def wind_direction(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     """Meteorological wind direction in degrees, ``[0, 360)``.
 
@@ -92,12 +96,14 @@ def wind_direction(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     return jnp.where(calm, jnp.nan, d)
 
 
+@compiled
 def wrap180(angle: Float[ArrayLike, ...]) -> Float[Array, ...]:
     """Wrap angles in degrees to ``(-180, 180]``."""
     angle = jnp.asarray(angle)
     return 180.0 - jnp.mod(180.0 - angle, 360.0)
 
 
+@compiled
 def direction_difference(
     to: Float[ArrayLike, "... 3"], frm: Float[ArrayLike, "... 3"]
 ) -> Float[Array, ...]:
@@ -127,6 +133,7 @@ def direction_difference(
     return jnp.where(calm, jnp.nan, d)
 
 
+@compiled
 def seed_azimuth(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     """The seed UDF's flow azimuth in degrees, ``[0, 360)``: heading clockwise from ``+x``.
 
@@ -140,7 +147,12 @@ def seed_azimuth(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
 
 def heading(direction_deg, dtype=None) -> Float[Array, 3]:
     """Unit horizontal vector the wind blows *towards* for a meteorological direction."""
-    d = jnp.deg2rad(jnp.asarray(direction_deg, dtype=dtype))
+    return _heading(jnp.asarray(direction_deg, dtype=dtype))
+
+
+@compiled
+def _heading(direction_deg):
+    d = jnp.deg2rad(direction_deg)
     return jnp.stack([-jnp.sin(d), -jnp.cos(d), jnp.zeros_like(d)])
 
 

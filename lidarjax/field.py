@@ -30,6 +30,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._precision import default_float, difference, is_concrete, split
+from ._util import compiled
 
 __all__ = ["AbstractField", "GridField", "SnapshotField", "FieldSequence", "TimeSampler",
            "SteadySampler", "DirectSampler"]
@@ -81,14 +82,11 @@ class AbstractField(eqx.Module):
         if not isinstance(points, jax.Array) and is_concrete(points, self.origin, self.origin_lo):
             p64 = np.asarray(points, dtype=np.float64)
             o64 = np.asarray(self.origin, np.float64) + np.asarray(self.origin_lo, np.float64)
-            return self.sample_local(jnp.asarray((p64 - o64).astype(dtype)))
+            return _sample_local(self, jnp.asarray((p64 - o64).astype(dtype)))
         points = jnp.asarray(points)
         if not jnp.issubdtype(points.dtype, jnp.floating):
             points = points.astype(dtype)
-        # points wider than the field are split into the field's dtype first; the high parts
-        # are subtracted exactly whatever the compiler fuses (`lidarjax._precision`)
-        zero = jnp.zeros((), dtype)
-        return self.sample_local(difference(points, zero, self.origin, self.origin_lo, dtype))
+        return _sample_absolute(self, points)
 
     def los_local(
         self, points: Float[Array, "... 3"], directions: Float[Array, "... 3"]
@@ -174,6 +172,22 @@ class SteadySampler(TimeSampler):
         lead = self.values.shape[:-1] if self.vector else self.values.shape
         shape = jnp.broadcast_shapes(jnp.shape(time), lead)
         return jnp.broadcast_to(self.values, shape + self.values.shape[len(lead):])
+
+
+@compiled
+def _sample_local(field, points):
+    """`AbstractField.sample_local`, one compiled program when called from the host."""
+    return field.sample_local(points)
+
+
+@compiled
+def _sample_absolute(field, points):
+    """`AbstractField.sample` at absolute points already in a JAX array."""
+    # points wider than the field are split into the field's dtype first; the high parts
+    # are subtracted exactly whatever the compiler fuses (`lidarjax._precision`)
+    dtype = field.dtype
+    zero = jnp.zeros((), dtype)
+    return field.sample_local(difference(points, zero, field.origin, field.origin_lo, dtype))
 
 
 class DirectSampler(TimeSampler):
@@ -419,9 +433,11 @@ class GridField(AbstractField):
             detected = tuple(_is_uniform(a, rtol) for a in arrays)
             origin64 = np.array([a[0] for a in arrays])
             self.origin, self.origin_lo = split(origin64, dtype)
-            self.x_local, self.y_local, self.z_local = (
-                jnp.asarray((a - a[0]).astype(dtype)) for a in arrays
-            )
+            local = [(a - a[0]).astype(dtype) for a in arrays]
+            self.x_local, self.y_local, self.z_local = (jnp.asarray(a) for a in local)
+            # nodes per metre along each axis, in the working dtype, on the host
+            scale = np.stack([np.asarray(a.size - 1, dtype) / np.where(a[-1] > 0, a[-1], 1).astype(dtype)
+                              for a in local])
         else:
             detected = (False, False, False)
             xs = [jnp.asarray(a) for a in axes]
@@ -434,17 +450,15 @@ class GridField(AbstractField):
             self.x_local, self.y_local, self.z_local = (
                 (a - a[0]).astype(dtype) for a in xs
             )
+            scale = jnp.stack([(a.shape[0] - 1) / jnp.where(a[-1] > 0, a[-1], 1)
+                               for a in (self.x_local, self.y_local, self.z_local)])
         if uniform is None:
             uniform = detected
         elif isinstance(uniform, bool):
             uniform = (uniform,) * 3
         self.uniform = tuple(bool(u) for u in uniform)
         self.velocity = velocity
-        scale = []
-        for nodes in (self.x_local, self.y_local, self.z_local):
-            extent = nodes[-1]
-            scale.append((nodes.shape[0] - 1) / jnp.where(extent > 0, extent, 1))
-        self.index_scale = jnp.stack(scale).astype(dtype)
+        self.index_scale = jnp.asarray(scale).astype(dtype)
         self.index_start = jnp.zeros(3, dtype)
 
     # -- coordinates --------------------------------------------------------------------

@@ -41,6 +41,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._precision import HIGHEST
+from ._util import compiled
 
 __all__ = [
     "rotation_x",
@@ -136,6 +137,7 @@ def cfd_to_north_rotation(mount) -> Float[Array, "3 3"]:
     return rotation_z(mount.psi - mount.beta - mount.gamma - mount.epsilon)
 
 
+@compiled
 def beam_directions(
     azimuth_deg: Float[ArrayLike, " b"], cone_deg: Float[ArrayLike, " b"]
 ) -> Float[Array, "b 3"]:

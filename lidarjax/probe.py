@@ -100,6 +100,7 @@ from scipy import special
 
 from ._backend import is_accelerator
 from ._precision import default_float, is_concrete
+from ._util import compiled
 
 __all__ = ["AbstractProbe", "PointProbe", "PulsedProbe", "CWProbe", "probe_for_spacing", "probe_transfer"]
 
@@ -363,6 +364,7 @@ class PulsedProbe(AbstractProbe):
         rp = self._rp(self.pulse_fwhm.dtype)
         return rp**2 / 2 + self.gate_length**2 / 12
 
+    @compiled
     def weight(self, offset, focus_range=None):
         """``phi(offset)`` (1 / length); independent of the focus range."""
         offset = jnp.asarray(offset)
@@ -387,6 +389,7 @@ class PulsedProbe(AbstractProbe):
             return half
         return jnp.broadcast_to(half, jnp.shape(focus_range))
 
+    @compiled
     def nodes(self, focus_range):
         """``(offsets (..., q), weights (..., q))`` for ranges ``(...)``: midpoints over the
         support cut at the lidar (``|o| < min(support, f)``), weights summing to the
@@ -499,6 +502,7 @@ class CWProbe(AbstractProbe):
         lam, a = self.wavelength.astype(dtype), self.aperture_radius.astype(dtype)
         return lam * f.astype(dtype) ** 2 / (np.pi * a**2)
 
+    @compiled
     def weight(self, offset, focus_range):
         """Lorentzian density ``G / (pi (o^2 + G^2))`` (1 / length), uncut."""
         g = self.hwhm(focus_range)
@@ -510,12 +514,14 @@ class CWProbe(AbstractProbe):
         f = jnp.asarray(focus_range)
         return f.astype(_float_dtype(f))
 
+    @compiled
     def kept_weight(self, focus_range):
         """Lorentzian weight inside the cut, ``(2/pi) atan(f / G)`` (0.96 at 100 m, 0.90 at
         249 m with the default optics)."""
         f = jnp.asarray(focus_range)
         return (2 / np.pi) * jnp.arctan(f.astype(_float_dtype(f)) / self.hwhm(f))
 
+    @compiled
     def nodes(self, focus_range):
         """``(offsets (..., q), weights (..., q))`` for ranges ``(...)``: the weights sum to
         `kept_weight` (`simulate` renormalises them and flags the height when the rest

@@ -39,6 +39,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from scipy.interpolate import CubicSpline
 
 from ._precision import default_float, is_concrete
+from ._util import compiled
 from .angles import horizontal_speed, wind_direction
 from .forward import Simulation
 from .frames import cfd_to_north_rotation
@@ -214,12 +215,14 @@ class PeriodicSpline(eqx.Module):
     coefficients: Float[Array, "4 s ..."]
     uniform: bool = eqx.field(static=True)
 
+    @compiled
     def __call__(self, direction: Float[ArrayLike, ...]) -> Float[Array, ...]:
         """Values at `direction` (degrees): shape ``direction.shape + trailing``."""
         direction = jnp.asarray(direction, self.start.dtype)
         k, t = locate(self.start, self.offsets, self.widths, self.uniform, direction)
         return _cubic(self.coefficients[:, k], t)
 
+    @compiled
     def per_row(self, direction: Float[ArrayLike, "... n"]) -> Float[Array, "... n"]:
         """Values with one direction per entry of the first trailing axis (per height):
         `direction` ``(..., n)`` with ``n = trailing[0]`` gives ``(..., n, *trailing[1:])``."""

@@ -39,10 +39,12 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._precision import default_float, is_concrete
+from .._util import compiled
 
 __all__ = ["ScanPattern", "ray_unit_vectors", "suggest_sub_rays", "gate_ranges"]
 
 
+@compiled
 def ray_unit_vectors(azimuth_deg: Float[ArrayLike, ...],
                      elevation_deg: Float[ArrayLike, ...]) -> Float[Array, "... 3"]:
     """Unit vectors ``(cos e sin a, cos e cos a, sin e)`` in the lidar's body frame for
@@ -169,20 +171,24 @@ class ScanPattern(eqx.Module):
         frac = (jnp.arange(self.n_sub, dtype=self.accumulation.dtype) + 0.5) / self.n_sub - 0.5
         return self.accumulation[:, None] * frac[None, :]
 
+    @compiled
     def sub_angles(self) -> tuple[Float[Array, "r k"], Float[Array, "r k"]]:
         """Azimuth and elevation (degrees) of every sub-ray."""
         tau = self.sub_offsets()
         return (self.azimuth[:, None] + self.azimuth_rate[:, None] * tau,
                 self.elevation[:, None] + self.elevation_rate[:, None] * tau)
 
+    @compiled
     def sub_times(self) -> Float[Array, "r k"]:
         """Time of every sub-ray, s from the scan start."""
         return self.ray_times()[:, None] + self.sub_offsets()
 
+    @compiled
     def directions(self) -> Float[Array, "r 3"]:
         """Body-frame unit vectors of the rays at mid-accumulation."""
         return ray_unit_vectors(self.azimuth, self.elevation)
 
+    @compiled
     def sub_directions(self) -> Float[Array, "r k 3"]:
         """Body-frame unit vectors of every sub-ray."""
         return ray_unit_vectors(*self.sub_angles())

@@ -21,6 +21,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._precision import HIGHEST, default_float, is_concrete, split
+from .._util import compiled
 from ..angles import heading
 from ..field import AbstractField
 
@@ -52,6 +53,7 @@ class Uniform(AbstractField):
     direction: Float[Array, ""]
     w: Float[Array, ""]
 
+    @compiled
     def sample_local(self, points):
         v = self.speed * heading(self.direction, self.dtype) + jnp.stack(
             [0.0, 0.0, 1.0]
@@ -82,6 +84,7 @@ class PowerLaw(AbstractField):
     direction: Float[Array, ""]
     veer: Float[Array, ""]
 
+    @compiled
     def sample_local(self, points):
         h = points[..., 2]
         above = h > 0
@@ -122,6 +125,7 @@ class Linear(AbstractField):
     velocity: Float[Array, 3]
     gradient: Float[Array, "3 3"]
 
+    @compiled
     def sample_local(self, points):
         return self.velocity + jnp.einsum("ij,...j->...i", self.gradient, points,
                                            precision=HIGHEST)
@@ -161,6 +165,7 @@ class Hemisphere(AbstractField):
         the distance to the centre, at least ``R`` outside the body."""
         return _host_scale(self.radius, 0.5)
 
+    @compiled
     def sample_local(self, points):
         e = heading(self.direction, self.dtype)
         r2 = jnp.sum(points * points, axis=-1)
@@ -202,7 +207,8 @@ class Hill(AbstractField):
 
     i.e. ``u_n'(n, 0) = U_n H L (L^2 - n^2) / (L^2 + n^2)^2`` (fractional speed-up ``H/L`` at
     the crest) and ``w'(n, 0) = U_n dzs/dn`` (flow along the surface). The along-ridge
-    component is unchanged. NaN below the terrain. Valid for gentle slopes (``H/L < ~0.3``).
+    component is unchanged. NaN below the terrain (a point on it to within 8 units of
+    rounding counts as on it). Valid for gentle slopes (``H/L < ~0.3``).
     """
 
     origin: Float[Array, 3]
@@ -220,6 +226,7 @@ class Hill(AbstractField):
         ``k = 6.9 / L``, the Nyquist wavenumber of a spacing ``0.45 L``."""
         return _host_scale(self.half_width, 0.5)
 
+    @compiled
     def sample_local(self, points):
         a = jnp.deg2rad(self.ridge_normal)
         nvec = jnp.stack([jnp.sin(a), jnp.cos(a), jnp.zeros_like(a)])
@@ -229,7 +236,10 @@ class Hill(AbstractField):
         n = jnp.sum(points * nvec, axis=-1)
         big_h, big_l = self.height, self.half_width
         ground = big_h / (1.0 + (n / big_l) ** 2)
-        above = points[..., 2] >= ground
+        # a point on the terrain to rounding (computed by another program: a few ulps
+        # either way) is on it, not below
+        slack = 8 * jnp.finfo(ground.dtype).eps * jnp.abs(ground)
+        above = points[..., 2] >= ground - slack
         z = jnp.where(above, points[..., 2], ground)  # finite below the terrain (masked)
         # 1/A^2 with A = L - i zeta = (L + z) - i n:  1/A^2 = conj(A)^2 / |A|^4
         a_re, a_im = big_l + z, -n
