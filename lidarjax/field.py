@@ -847,6 +847,7 @@ class SnapshotField(AbstractField):
         """The first snapshot's velocity (m/s, CFD frame) at local points (metres)."""
         return self.sample_local_at(points, self.times[0])
 
+    @compiled
     def sample_local_at(self, points, time):
         points, time = self._broadcast(points, time)
         i, s, inside = self._locate(time)
@@ -855,6 +856,7 @@ class SnapshotField(AbstractField):
         ok = inside & jnp.all(jnp.isfinite(v0) & jnp.isfinite(v1), axis=-1)
         return _lerp_in_time(v0, v1, s[..., None], ok[..., None])
 
+    @compiled
     def los_local_at(self, points, directions, time):
         points, time = self._broadcast(points, time)
         d = jnp.broadcast_to(jnp.asarray(directions).astype(self.dtype), points.shape)

@@ -70,6 +70,7 @@ from jaxtyping import Array, Float
 
 from .._deprecated import deprecated_getattr
 from .._precision import is_concrete, split_bits
+from .._util import compiled
 from ..angles import heading
 from ..field import AbstractField, TimeSampler
 from ..frames import rotate
@@ -234,12 +235,14 @@ class FrozenTurbulence(AbstractField):
         xi = (local[..., 0] - self.shift) - travelled
         return axes, shape, tuple(jnp.broadcast_to(c, shape) for c in (xi, local[..., 1], local[..., 2]))
 
+    @compiled
     def sample_local_at(self, points, time):
         """Velocity (m/s, CFD frame) at field-local points (m) and times (s, broadcastable to
         ``points.shape[:-1]``): the mean field plus the advected fluctuation. NaN where either
         is NaN (outside the mean field, or outside a non-periodic box laterally/vertically)."""
         return self.mean.sample_local_at(points, time) + self.fluctuation_at(points, time)
 
+    @compiled
     def los_local_at(self, points, directions, time):
         """`sample_local_at` projected on unit `directions` (m/s): the mean field's LOS plus
         the box's, projected at the box cell's corners on the direction in box axes (the
