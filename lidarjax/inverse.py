@@ -50,6 +50,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._backend import CPU_BATCH, bucket, default_batch, positive_size
 from ._precision import HIGHEST, default_float, is_concrete
+from ._util import compiled
 from .flags import InverseFlag
 from .response import (
     AbstractProfile,
@@ -572,11 +573,7 @@ def invert_reconstructed(
     dtype = speed.dtype if jnp.issubdtype(speed.dtype, jnp.floating) else table.dtype
     speed = jnp.broadcast_to(speed, shape).astype(dtype)
     direction = jnp.broadcast_to(direction, shape).astype(dtype)
-    calm = speed == 0
-    impossible = speed < 0  # never reinterpreted as the opposite direction
-    rad = jnp.deg2rad(jnp.where(calm, 0.0, direction))
-    uv = jnp.stack([-speed * jnp.sin(rad), -speed * jnp.cos(rad)], axis=-1)
-    uv = jnp.where(impossible[..., None], jnp.nan, uv)
+    uv, impossible = _reported_uv(speed, direction)
     spline = table.reconstructed_spline
     sub = PeriodicSpline(
         spline.start, spline.offsets, spline.widths, spline.coefficients[..., :2], spline.uniform
@@ -589,6 +586,18 @@ def invert_reconstructed(
     )
     flag = jnp.where(impossible, int(InverseFlag.IMPOSSIBLE_INPUT), 0).astype(out.flags.dtype)
     return eqx.tree_at(lambda r: r.flags, out, out.flags | flag)
+
+
+@compiled
+def _reported_uv(speed, direction):
+    """Reported winds (speed m/s, meteorological direction degrees) as horizontal vectors
+    ``(..., 2)`` (m/s, toward which the wind blows), NaN for a negative speed, and where the
+    speed is negative (never reinterpreted as the opposite direction)."""
+    calm = speed == 0
+    impossible = speed < 0
+    rad = jnp.deg2rad(jnp.where(calm, 0.0, direction))
+    uv = jnp.stack([-speed * jnp.sin(rad), -speed * jnp.cos(rad)], axis=-1)
+    return jnp.where(impossible[..., None], jnp.nan, uv), impossible
 
 
 # ------------------------------------------------------------------------------------------

@@ -26,6 +26,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._precision import HIGHEST
+from ._util import compiled
 from .angles import direction_difference, horizontal_speed, wrap180
 from .inverse import invert_reconstructed
 from .response import ResponseTable
@@ -55,6 +56,7 @@ class CorrectionRose(eqx.Module):
     target: str = eqx.field(static=True)
     sectors: bool = eqx.field(static=True)
 
+    @compiled
     def at(
         self, direction: Float[ArrayLike, "... h"]
     ) -> tuple[Float[Array, "... h"], Float[Array, "... h"]]:
