@@ -37,19 +37,24 @@ def compiled(fn):
     Called outside `jax.jit`, JAX runs a chain of `jax.numpy` operations one by one and
     compiles each the first time it meets a shape (20-80 ms apiece on a CPU); a helper of
     twenty operations then takes a second on its first call. Compiled, it takes one
-    compilation, and inside a trace it is inlined. Positional Python numbers, lists and
-    tuples are made arrays first, so a number is a dynamic input, never a static one that
-    compiles again per value (`jax.jit` takes no lists). Keyword arguments pass as given:
-    use them for static choices."""
+    compilation, and inside a trace it is inlined. Python numbers, lists and tuples, given
+    by position or by keyword, are made arrays first, so a number is a dynamic input, never
+    a static one that compiles again per value (`jax.jit` takes no lists); booleans,
+    strings and ``None`` stay static."""
     jitted = eqx.filter_jit(fn)
 
     @functools.wraps(fn)
     def call(*args, **kwargs):
-        args = tuple(jnp.asarray(a) if isinstance(a, int | float | list | tuple)
-                     and not isinstance(a, bool) else a for a in args)
-        return jitted(*args, **kwargs)
+        return jitted(*map(_as_input, args), **{k: _as_input(v) for k, v in kwargs.items()})
 
     return call
+
+
+def _as_input(value):
+    """A Python number, list or tuple as an array (a dynamic input of `compiled`)."""
+    if isinstance(value, int | float | list | tuple) and not isinstance(value, bool):
+        return jnp.asarray(value)
+    return value
 
 
 def file_error(path: PathLike, line: int | None, message: str) -> ValueError:

@@ -304,6 +304,15 @@ class IndexedPoints:
         """The match distance (metres)."""
         return self.index.tolerance
 
+
+def _index_scale(xp, local_axes, dtype):
+    """Nodes per metre along each axis, ``(n - 1) / extent`` (0 for a single node), in
+    `dtype`, from the axes relative to their first node: `xp` is numpy for host axes,
+    jax.numpy for traced ones (the same IEEE division either way)."""
+    return xp.stack([xp.asarray(a.shape[0] - 1, dtype) / xp.where(a[-1] > 0, a[-1], 1).astype(dtype)
+                     for a in local_axes])
+
+
 def _check_axis(name: str, values) -> np.ndarray:
     arr = np.asarray(values, dtype=np.float64)
     if arr.ndim != 1:
@@ -435,9 +444,7 @@ class GridField(AbstractField):
             self.origin, self.origin_lo = split(origin64, dtype)
             local = [(a - a[0]).astype(dtype) for a in arrays]
             self.x_local, self.y_local, self.z_local = (jnp.asarray(a) for a in local)
-            # nodes per metre along each axis, in the working dtype, on the host
-            scale = np.stack([np.asarray(a.size - 1, dtype) / np.where(a[-1] > 0, a[-1], 1).astype(dtype)
-                              for a in local])
+            scale = _index_scale(np, local, dtype)  # on the host: no device operations
         else:
             detected = (False, False, False)
             xs = [jnp.asarray(a) for a in axes]
@@ -450,8 +457,7 @@ class GridField(AbstractField):
             self.x_local, self.y_local, self.z_local = (
                 (a - a[0]).astype(dtype) for a in xs
             )
-            scale = jnp.stack([(a.shape[0] - 1) / jnp.where(a[-1] > 0, a[-1], 1)
-                               for a in (self.x_local, self.y_local, self.z_local)])
+            scale = _index_scale(jnp, (self.x_local, self.y_local, self.z_local), dtype)
         if uniform is None:
             uniform = detected
         elif isinstance(uniform, bool):

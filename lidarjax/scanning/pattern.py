@@ -183,7 +183,6 @@ class ScanPattern(eqx.Module):
         """Time of every sub-ray, s from the scan start."""
         return self.ray_times()[:, None] + self.sub_offsets()
 
-    @compiled
     def directions(self) -> Float[Array, "r 3"]:
         """Body-frame unit vectors of the rays at mid-accumulation."""
         return ray_unit_vectors(self.azimuth, self.elevation)

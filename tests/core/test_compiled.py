@@ -32,6 +32,10 @@ def test_numbers_and_lists_are_dynamic_inputs():
     assert len(traces) == 1
     f(0.3, (1.0, 2.0, 3.0))  # a new shape traces again
     assert len(traces) == 2
+    for k in range(3):  # by keyword: dynamic too, and the positional call's program
+        np.testing.assert_allclose(f(0.2, y=[1.0 + k, 2.0]), np.sin(0.2) * np.array([1.0 + k, 2.0]),
+                                   rtol=1e-15)
+    assert len(traces) == 2
 
 
 def test_inside_transformations_and_for_methods():
