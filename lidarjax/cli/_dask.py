@@ -38,8 +38,12 @@ def dask_client(args):
     if args.workers is not None:
         if args.workers < 1:
             raise ValueError(f"--workers must be at least 1, got {args.workers}")
+        # No dashboard, and the scheduler's HTTP server on a free port: Dask's default 8787 is
+        # taken by any other cluster on the machine (and its "port in use" warning is an error
+        # under a strict warning filter).
         cluster = distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1,
-                                           processes=True, dashboard_address=None)
+                                           processes=True, dashboard_address=None,
+                                           scheduler_kwargs={"dashboard_address": ":0"})
     else:
         cluster = None
     try:

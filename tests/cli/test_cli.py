@@ -144,3 +144,25 @@ def test_correct_rejects_mismatched_heights(seed_case, table_path, capsys):
     assert main(["correct", "--table", str(table_path), "--records",
                  str(seed_case / "bad.sta"), "--quiet"]) == 2
     assert "heights" in capsys.readouterr().err
+
+
+def test_dask_workers_start_when_the_default_dashboard_port_is_taken():
+    """``--workers`` builds a local cluster; Dask's default HTTP port 8787 held by another
+    process (another cluster, a notebook's dashboard) must not stop it (CI failure, stop 27)."""
+    import socket
+    from types import SimpleNamespace
+
+    pytest.importorskip("distributed")
+    from lidarjax.cli._dask import dask_client
+
+    held = socket.socket()
+    try:
+        try:
+            held.bind(("0.0.0.0", 8787))
+            held.listen()
+        except OSError:
+            pass  # already held by someone else: the case under test all the same
+        with dask_client(SimpleNamespace(workers=1, scheduler=None, x64=True)) as client:
+            assert client.submit(pow, 3, 2).result() == 9
+    finally:
+        held.close()

@@ -94,8 +94,10 @@ def test_peak_memory_does_not_grow_with_runs(tmp_path):
 def test_dask_cluster_gives_the_identical_table(serial):
     distributed = pytest.importorskip("distributed")
     _, table, _ = serial
+    # scheduler HTTP server on a free port: 8787 may be held by another test's cluster
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+                                  dashboard_address=None, scheduler_kwargs={"dashboard_address": ":0"}
+                                  ) as cluster, distributed.Client(cluster) as client:
         tracker = Tracker()
         dtable, _ = build_table(SETTINGS, BETAS, tracker, SCAN, client=client)
     assert tracker.max_alive <= 2  # one per worker
