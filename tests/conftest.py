@@ -1,11 +1,50 @@
-"""Test configuration: float64 everywhere unless a test is about float32."""
+"""Test configuration: float64 everywhere unless a test is about float32; on a CPU, XLA's
+quick-to-compile code generation (below)."""
 
 import os
+import subprocess
+import sys
 
-import jax
-import numpy as np
-import pytest
-from hypothesis import settings
+# Compilation is two thirds of this suite's time on a CPU: ~4000 small programs, each compiled
+# once. XLA compiles them faster with LLVM at -O0 and, where the jaxlib still has it (0.10;
+# gone by 0.12), the legacy LLVM emitter instead of the MLIR fusion emitters: the simulate
+# program compiles in 0.6 s instead of 1.7 s (jax 0.10) or 1.2 s instead of 1.5 s (jax 0.12),
+# and the whole suite on 2 cores took 410 s instead of 830 s (jax 0.10). The code computes
+# the same IEEE operations; only roundings of fused a*b+c and the order of sums may differ,
+# which the library must survive anyway (GPUs and fast-math compilers differ more:
+# tests/core/test_fused_arithmetic.py runs those for real).
+# Set when XLA_FLAGS is unset, the default backend is the CPU and this jaxlib knows the flags
+# (an unknown XLA flag aborts the process: each set is probed in a subprocess first), before
+# any backend starts, so every xdist worker inherits it. LIDARJAX_TEST_XLA=default keeps
+# XLA's defaults (CI's Python 3.13 leg runs so: both code generators are tested).
+FAST_CPU_XLA_FLAGS = (
+    "--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=0",
+    "--xla_backend_optimization_level=0",
+)
+
+
+def _fast_cpu_compilation() -> None:
+    if os.environ.get("LIDARJAX_TEST_XLA", "fast") != "fast" or os.environ.get("XLA_FLAGS"):
+        return
+    for flags in FAST_CPU_XLA_FLAGS:
+        try:
+            probe = subprocess.run(
+                [sys.executable, "-c", "import jax; print(jax.default_backend())"],
+                env=dict(os.environ, XLA_FLAGS=flags), capture_output=True, text=True, timeout=300)
+        except (OSError, subprocess.TimeoutExpired):
+            return
+        if probe.returncode == 0:
+            if probe.stdout.strip().splitlines()[-1:] == ["cpu"]:
+                os.environ["XLA_FLAGS"] = flags
+            return
+
+
+_fast_cpu_compilation()
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from hypothesis import settings  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
@@ -14,6 +53,10 @@ settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True
 settings.register_profile("dev", deadline=None, print_blob=True)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
 os.environ.setdefault("LIDARJAX_NO_CACHE", "1")  # in-process CLI tests leave ~/.cache alone
+
+
+def pytest_report_header(config):
+    return f"XLA_FLAGS: {os.environ.get('XLA_FLAGS', '(unset)')}"
 
 
 @pytest.fixture(scope="session")
@@ -27,48 +70,42 @@ def site_records():
 
 
 # Seconds the slowest test files took in a full run (`--junitxml`, summed per file; 2 workers
-# on a 2-core machine): relative weights. With `--dist loadfile --no-loadscope-reorder`
-# (pyproject.toml) xdist hands the files out in collection order: these go first, longest
-# first, so that the two workers finish together instead of one of them starting a long
-# file at the end. A file not listed keeps its place after them; a stale number only costs
-# balance, never a test.
+# on a 2-core machine, jax 0.10 with the quick CPU compilation above): relative weights. With
+# `--dist loadfile --no-loadscope-reorder` (pyproject.toml) xdist hands the files out in
+# collection order: these go first, longest first, so that the two workers finish together
+# instead of one of them starting a long file at the end. A file not listed keeps its place
+# after them; a stale number only costs balance, never a test.
 SLOW_FILES = {
-    "tests/core/test_inverse.py": 111,
-    "tests/core/test_batch.py": 95,
-    "tests/core/test_probe.py": 93,
-    "tests/core/test_fused_arithmetic.py": 69,
-    "tests/core/test_sensitivity.py": 61,
-    "tests/cli/test_demo.py": 61,
-    "tests/core/test_stability_forward.py": 61,
-    "tests/core/test_forward.py": 58,
-    "tests/scenes/test_turbulence.py": 57,
-    "tests/core/test_series.py": 53,
-    "tests/cli/test_scanning_cli.py": 51,
-    "tests/cli/test_calibrate.py": 50,
-    "tests/core/test_unsteady.py": 47,
-    "tests/scenes/test_farm.py": 45,
-    "tests/core/test_scanning_nodes.py": 45,
-    "tests/core/test_scanning.py": 45,
-    "tests/workflows/test_seed_tables.py": 44,
-    "tests/io/test_openfoam_exact.py": 41,
-    "tests/core/test_mount.py": 41,
-    "tests/core/test_joint.py": 40,
-    "tests/workflows/test_farm_study.py": 39,
-    "tests/cli/test_farm.py": 38,
-    "tests/io/test_cellpoint_field.py": 38,
-    "tests/core/test_response.py": 38,
-    "tests/core/test_spectral.py": 37,
-    "tests/core/test_six_beam.py": 37,
-    "tests/cli/test_series.py": 35,
-    "tests/core/test_field.py": 28,
-    "tests/scenes/test_analytic.py": 28,
-    "tests/cli/test_cli_malformed.py": 26,
-    "tests/core/test_calibrate.py": 25,
-    "tests/workflows/test_monitor_points.py": 24,
-    "tests/cli/test_cli.py": 24,
-    "tests/core/test_scanning_reconstruct.py": 23,
-    "tests/core/test_precision.py": 22,
-    "tests/workflows/test_sensitivity_report.py": 20,
+    "tests/core/test_inverse.py": 36,
+    "tests/core/test_batch.py": 35,
+    "tests/core/test_fused_arithmetic.py": 32,
+    "tests/scenes/test_farm.py": 31,
+    "tests/cli/test_demo.py": 30,
+    "tests/scenes/test_turbulence.py": 28,
+    "tests/core/test_stability_forward.py": 28,
+    "tests/core/test_sensitivity.py": 28,
+    "tests/workflows/test_seed_tables.py": 26,
+    "tests/core/test_series.py": 26,
+    "tests/core/test_forward.py": 24,
+    "tests/core/test_probe.py": 23,
+    "tests/core/test_joint.py": 22,
+    "tests/cli/test_farm.py": 22,
+    "tests/io/test_openfoam_exact.py": 20,
+    "tests/cli/test_series.py": 20,
+    "tests/core/test_spectral.py": 19,
+    "tests/cli/test_scanning_cli.py": 19,
+    "tests/core/test_scanning_nodes.py": 19,
+    "tests/cli/test_cli_malformed.py": 17,
+    "tests/workflows/test_farm_study.py": 17,
+    "tests/core/test_unsteady.py": 16,
+    "tests/core/test_mount.py": 16,
+    "tests/core/test_scanning.py": 15,
+    "tests/core/test_six_beam.py": 14,
+    "tests/cli/test_calibrate.py": 13,
+    "tests/cli/test_sensitivity.py": 13,
+    "tests/cli/test_cli.py": 13,
+    "tests/workflows/test_sensitivity_report.py": 13,
+    "tests/io/test_cellpoint_field.py": 12,
 }
 
 

@@ -120,6 +120,13 @@ def dual_doppler(los_a: Float[ArrayLike, " p"], los_b: Float[ArrayLike, " p"],
                      jnp.asarray(direction_b, dtype), jnp.asarray(w, dtype))
 
 
+def _norm2(x, y):
+    """``sqrt(x^2 + y^2)`` with a zero (not NaN) gradient at the origin (``jnp.hypot``'s is
+    NaN there: the orthogonal crossing, condition number 1, has ``q = 0``)."""
+    s = x * x + y * y
+    return jnp.where(s > 0, jnp.sqrt(jnp.where(s > 0, s, 1)), 0)
+
+
 def _dual(los_a, los_b, na, nb, w):
     ya = los_a - na[..., 2] * w
     yb = los_b - nb[..., 2] * w
@@ -127,14 +134,16 @@ def _dual(los_a, los_b, na, nb, w):
     det = m11 * m22 - m12 * m21
     frob = m11**2 + m12**2 + m21**2 + m22**2
     finite = jnp.isfinite(ya) & jnp.isfinite(yb)
-    # singular values: s^2 = (F +- sqrt(F^2 - 4 det^2)) / 2; cond = s_max / s_min
-    disc = jnp.maximum(frob**2 - 4 * det**2, 0)
-    root = jnp.where(disc > 0, jnp.sqrt(jnp.where(disc > 0, disc, 1)), 0)
-    smin2 = (frob - root) / 2
+    # Singular values of a 2x2 matrix: s_max, s_min = (p +- q) / 2 with
+    # p = |(m11 + m22, m12 - m21)|, q = |(m11 - m22, m12 + m21)|, and p^2 - q^2 = 4 det, so
+    # cond = (p + q) / (p - q) = (p + q)^2 / (4 |det|): no cancellation anywhere (the textbook
+    # sqrt(F^2 - 4 det^2) loses half the digits as cond -> 1: 1.5e-8 off at 90 degrees in
+    # float64, and whether it lands on 0 depends on how the compiler rounds).
+    p = _norm2(m11 + m22, m12 - m21)
+    q = _norm2(m11 - m22, m12 + m21)
     solvable = jnp.abs(det) > 1e-12 * jnp.maximum(frob, 1e-300)
     ok = finite & solvable
-    smin2_safe = jnp.where(solvable, smin2, 1)
-    cond = jnp.sqrt(jnp.where(solvable, (frob + root) / 2, 1) / jnp.where(smin2_safe > 0, smin2_safe, 1))
+    cond = (p + q) ** 2 / (4 * jnp.abs(jnp.where(solvable, det, 1)))
     det_safe = jnp.where(ok, det, 1)
     ya_s, yb_s = jnp.where(ok, ya, 0), jnp.where(ok, yb, 0)
     u = (m22 * ya_s - m12 * yb_s) / det_safe

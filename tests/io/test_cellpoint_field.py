@@ -49,7 +49,7 @@ def small():
 
 def test_exact_at_the_points_grid_elsewhere(small):
     """At the prepared points: OpenFOAM's cellPoint (lidarjax's reproduction, itself equal to
-    OpenFOAM's probes to 5e-11 m/s); anywhere else: the grid, bit for bit."""
+    OpenFOAM's probes to 5e-11 m/s); anywhere else: the grid, to rounding."""
     of, grid, pts, *_ = small
     f = cellpoint_field(of, grid, pts)
     assert isinstance(f, CellPointField) and f.resolution == grid.resolution
@@ -60,7 +60,10 @@ def test_exact_at_the_points_grid_elsewhere(small):
     assert ok.sum() > 50
     np.testing.assert_allclose(got[ok], ref[ok], rtol=0, atol=1e-12)
     other = pts[ok][:20] + np.array([0.013, -0.021, 0.017])
-    np.testing.assert_array_equal(np.asarray(_sample(f, other)), np.asarray(_sample(grid, other)))
+    # the grid's own interpolation; two compiled programs may round a fused a*b+c differently
+    # (XLA's legacy CPU emitter does, by 1 ulp): to 2 ulp
+    np.testing.assert_array_max_ulp(np.asarray(_sample(f, other)), np.asarray(_sample(grid, other)),
+                                    maxulp=2)
     assert np.abs(np.asarray(_sample(grid, pts[ok])) - ref[ok]).max() > 1e-3  # the grid is not exact
 
 
