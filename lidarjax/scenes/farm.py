@@ -92,6 +92,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._precision import default_float, is_concrete, split
+from .._util import compiled
 from ..field import AbstractField
 from ..mount import Mount
 
@@ -131,7 +132,7 @@ def _half_angles(r1, r2, d):
 
 
 @jax.custom_jvp
-def overlap_area(r1, r2, d):
+def _overlap_area(r1, r2, d):
     """Overlap area (m^2) of a wake circle of radius `r1` and a rotor disc of radius `r2`
     whose centres are `d` apart (metres), seed 001's eqs. 2-6.
 
@@ -162,14 +163,18 @@ def overlap_area(r1, r2, d):
     return jnp.where(none, 0.0, jnp.where(inside, jnp.pi * small * small, lens))
 
 
-@overlap_area.defjvp
+@_overlap_area.defjvp
 def _overlap_area_jvp(primals, tangents):
     r1, r2, d = jnp.broadcast_arrays(*primals)
     t1, t2, td = (jnp.broadcast_to(t, r1.shape) for t in tangents)
-    area = overlap_area(r1, r2, d)
+    area = _overlap_area(r1, r2, d)
     a1, a2 = _half_angles(r1, r2, d)
     chord = 2.0 * r1 * jnp.sin(a1)  # = sqrt(T) / d in the partial case, 0 outside it
     return area, 2.0 * r1 * a1 * t1 + 2.0 * r2 * a2 * t2 - chord * td
+
+
+# public: one compiled program from the host (eagerly, its ~40 operations compiled one by one)
+overlap_area = compiled(_overlap_area)
 
 
 # ----------------------------------------------------------------------------------------
@@ -376,7 +381,7 @@ class WindFarm(AbstractField):
                 d2 = dy * dy + dz * dz
                 pos = d2 > 0
                 dist = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)
-                frac = overlap_area(jnp.maximum(r1, 0.0), radius[j], dist) / (
+                frac = _overlap_area(jnp.maximum(r1, 0.0), radius[j], dist) / (
                     jnp.pi * radius[j] ** 2)
                 c = (radius / (r1 + EPS)) ** 2
                 d = jnp.where(dx > EPS, 2.0 * a * c * frac, 0.0)
