@@ -190,6 +190,12 @@ def _sample_absolute(field, points):
     return field.sample_local(difference(points, zero, field.origin, field.origin_lo, dtype))
 
 
+@compiled
+def _has_inf(values):
+    """Whether a JAX array holds an infinity (one compiled program from the host)."""
+    return jnp.any(jnp.isinf(values))
+
+
 class DirectSampler(TimeSampler):
     """Samples the field at the points at each call (no preparation)."""
 
@@ -422,7 +428,7 @@ class GridField(AbstractField):
         if host is not None:
             has_inf = bool(np.isinf(host).any())
         else:
-            has_inf = is_concrete(velocity) and bool(jnp.any(jnp.isinf(velocity)))
+            has_inf = is_concrete(velocity) and bool(_has_inf(velocity))
         if has_inf:
             raise ValueError(
                 "GridField: velocity contains inf; mark solid or missing nodes with NaN."
