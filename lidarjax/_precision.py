@@ -62,6 +62,13 @@ def default_float():
     return jnp.asarray(0.0).dtype
 
 
+def safe_sqrt(square):
+    """``sqrt(square)`` for ``square >= 0``, 0 where it is not positive, with a zero (not
+    infinite or NaN) gradient there: the safe-mask form of a norm or RMS at the origin."""
+    pos = square > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, square, 1)), 0)
+
+
 def as_float(value, dtype=None):
     """A JAX float array of `dtype` (default: the configured default float dtype)."""
     value = jnp.asarray(value)

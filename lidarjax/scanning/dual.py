@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from .._precision import difference, is_concrete
+from .._precision import difference, is_concrete, safe_sqrt
 from ..field import AbstractField
 from ..flags import InverseFlag
 from ..frames import body_to_cfd_rotation, rotate
@@ -120,13 +120,6 @@ def dual_doppler(los_a: Float[ArrayLike, " p"], los_b: Float[ArrayLike, " p"],
                      jnp.asarray(direction_b, dtype), jnp.asarray(w, dtype))
 
 
-def _norm2(x, y):
-    """``sqrt(x^2 + y^2)`` with a zero (not NaN) gradient at the origin (``jnp.hypot``'s is
-    NaN there: the orthogonal crossing, condition number 1, has ``q = 0``)."""
-    s = x * x + y * y
-    return jnp.where(s > 0, jnp.sqrt(jnp.where(s > 0, s, 1)), 0)
-
-
 def _dual(los_a, los_b, na, nb, w):
     ya = los_a - na[..., 2] * w
     yb = los_b - nb[..., 2] * w
@@ -139,8 +132,9 @@ def _dual(los_a, los_b, na, nb, w):
     # cond = (p + q) / (p - q) = (p + q)^2 / (4 |det|): no cancellation anywhere (the textbook
     # sqrt(F^2 - 4 det^2) loses half the digits as cond -> 1: 1.5e-8 off at 90 degrees in
     # float64, and whether it lands on 0 depends on how the compiler rounds).
-    p = _norm2(m11 + m22, m12 - m21)
-    q = _norm2(m11 - m22, m12 + m21)
+    # (safe_sqrt, not jnp.hypot, whose gradient is NaN at the orthogonal crossing's q = 0)
+    p = safe_sqrt((m11 + m22) ** 2 + (m12 - m21) ** 2)
+    q = safe_sqrt((m11 - m22) ** 2 + (m12 + m21) ** 2)
     solvable = jnp.abs(det) > 1e-12 * jnp.maximum(frob, 1e-300)
     ok = finite & solvable
     cond = (p + q) ** 2 / (4 * jnp.abs(jnp.where(solvable, det, 1)))

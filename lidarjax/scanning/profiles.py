@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .._precision import safe_sqrt
 from ..angles import horizontal_speed
 from ..flags import InverseFlag
 from ..scan import ILL_CONDITIONED
@@ -108,7 +109,7 @@ def _vad(los, az, el, ranges):
     cond = jnp.sqrt(lam_safe[..., -1] / lam_safe[..., 0])
     resid = jnp.where(ok, y - jnp.einsum("ri,...gi->...rg", n, v), 0)
     ms = jnp.sum(resid**2, axis=-2) / jnp.maximum(count, 1)
-    rms = jnp.where(ms > 0, jnp.sqrt(jnp.where(ms > 0, ms, 1)), 0)  # finite gradient at 0
+    rms = safe_sqrt(ms)  # finite gradient at 0
     flags = jnp.where(count >= 3, 0, int(InverseFlag.TOO_FEW_BEAMS))
     flags |= jnp.where((count >= 3) & (~regular | (cond > ILL_CONDITIONED)),
                        int(InverseFlag.ILL_CONDITIONED), 0)

@@ -91,7 +91,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._precision import default_float, is_concrete, split
+from .._precision import default_float, is_concrete, safe_sqrt, split
 from .._util import compiled
 from ..field import AbstractField
 from ..mount import Mount
@@ -346,9 +346,7 @@ class WindFarm(AbstractField):
             return jnp.sum(d, axis=axis)
         if self.combination == "max":
             return jnp.max(d, axis=axis)
-        s = jnp.sum(d * d, axis=axis)
-        pos = s > 0
-        return jnp.where(pos, jnp.sqrt(jnp.where(pos, s, 1.0)), 0.0)
+        return safe_sqrt(jnp.sum(d * d, axis=axis))
 
     def solve(self) -> FarmState:
         """Solve the turbines in upstream order: rotor-averaged inflow, Ct and induction.
@@ -378,9 +376,7 @@ class WindFarm(AbstractField):
             dz = self.hub_height[j] - self.hub_height
             if self.model == "top_hat":
                 r1 = radius + self.expansion * dx
-                d2 = dy * dy + dz * dz
-                pos = d2 > 0
-                dist = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)
+                dist = safe_sqrt(dy * dy + dz * dz)
                 frac = _overlap_area(jnp.maximum(r1, 0.0), radius[j], dist) / (
                     jnp.pi * radius[j] ** 2)
                 c = (radius / (r1 + EPS)) ** 2
