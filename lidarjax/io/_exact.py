@@ -215,7 +215,8 @@ class CellPointSnapshots(AbstractField):
         i, s, inside = self.grid._locate(time)
         e0 = jnp.sum(lam[..., None] * self.values[i, best], axis=-2)
         e1 = jnp.sum(lam[..., None] * self.values[i + 1, best], axis=-2)
-        ok = inside & self.valid[i, best] & self.valid[i + 1, best]
+        # at a snapshot's own time only its values count (a bad neighbour does not spoil it)
+        ok = inside & self.valid[i, best] & (self.valid[i + 1, best] | (s == 0))
         return e0, e1, s, ok, hit
 
     def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
