@@ -134,3 +134,33 @@ def test_native_path_equals_openfoam_sampling_on_the_hill(dtype, tmp_path):
     a, b = np.asarray(sim.lidar_speed), np.asarray(foam.lidar_speed)
     assert np.isfinite(a).all() and np.isfinite(b).all()
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-8 if dtype == np.float64 else 2e-4)
+
+
+def test_monitor_points_given_the_field_write_the_nodes_simulate_uses(roof, tmp_path):
+    """`lidarjax monitor-points --field CASE` chooses the nodes as `simulate` does (77 on the
+    roof: nothing copied by hand), its read-back equals the native path, and `--sampled`
+    without the field refuses the 77-node samples in one line that names the count."""
+    settings, case, native, _ = roof
+    common = ["--scan", "windcube_v2", "--probe", "pulsed"]
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert main(["monitor-points", str(settings), *common, "--field", str(case),
+                     "--out", str(tmp_path / "w")]) == 0
+        assert main(["monitor-points", str(settings), *common, "--probe-nodes", "77",
+                     "--out", str(tmp_path / "n")]) == 0
+    assert "probe nodes per beam: 77" in err.getvalue()
+    a = (tmp_path / "w" / "lidarProbes.csv").read_text().splitlines()
+    b = (tmp_path / "n" / "lidarProbes.csv").read_text().splitlines()
+    assert [r for r in a if not r.startswith("#")] == [r for r in b if not r.startswith("#")]
+    sampled = _unzipped(tmp_path, case, "400", "pulsed_roof")
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["monitor-points", str(settings), *common, "--field", str(case),
+                     "--sampled", str(sampled), "--out", str(tmp_path / "r")]) == 0
+    got = read_table_csv(tmp_path / "r" / "simulation_0.csv").columns
+    _check_equal(native, got, "monitor-points --field")
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert main(["monitor-points", str(settings), *common, "--sampled", str(sampled),
+                     "--out", str(tmp_path / "x")]) == 2
+    line = err.getvalue().strip()
+    assert "\n" not in line.split("error:")[-1] and "--probe-nodes 77" in line, line
