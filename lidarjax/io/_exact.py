@@ -153,8 +153,10 @@ class CellPointSnapshots(AbstractField):
     geometry is prepared once, only the vertex values change), linear in time between
     consecutive snapshots, NaN outside their span (as `lidarjax.SnapshotField`), in no cell,
     or where a snapshot's values there are not finite. Any other query: the graded grid's
-    snapshots (`grid`, a `SnapshotField`). Differentiable in the vertex values, the query
-    position (barycentric coordinates) and the time.
+    snapshots (`grid`, a `SnapshotField`; a sequence read with ``grid_fallback=False``
+    holds a NaN grid of two nodes per axis there, so any other query is NaN, flagged, and
+    `resolution` is the graded grid's all the same). Differentiable in the vertex values,
+    the query position (barycentric coordinates) and the time.
 
     Built by `CellPointSnapshots.from_geometry` (on the host, per window of a
     `lidarjax.FieldSequence`).
@@ -168,8 +170,10 @@ class CellPointSnapshots(AbstractField):
     inverse: Float[Array, "n 3 3"]
     values: Float[Array, "t n 4 3"]
     valid: Bool[Array, "t n"]
+    grid_resolution: float | None = eqx.field(static=True)
 
-    def __init__(self, grid: SnapshotField, geometry: CellPointField, values: Any):
+    def __init__(self, grid: SnapshotField, geometry: CellPointField, values: Any, *,
+                 resolution: float | None = None):
         if not isinstance(grid, SnapshotField) or not isinstance(geometry, CellPointField):
             raise ValueError("CellPointSnapshots: needs a SnapshotField and a CellPointField "
                              "(the prepared points' geometry)")
@@ -184,11 +188,13 @@ class CellPointSnapshots(AbstractField):
         self.index, self.anchor, self.inverse = geometry.index, geometry.anchor, geometry.inverse
         self.values = jnp.asarray(np.where(valid[..., None, None], val, 0.0).astype(grid.dtype))
         self.valid = jnp.asarray(valid)
+        self.grid_resolution = None if resolution is None else float(resolution)
 
     @property
     def resolution(self) -> float | None:
-        """The grid's resolution (m): probe nodes are chosen for it."""
-        return self.grid.resolution
+        """The graded grid's resolution (m): probe nodes are chosen for it (`resolution`
+        where the window holds no grid, only the prepared points)."""
+        return self.grid.resolution if self.grid_resolution is None else self.grid_resolution
 
     @property
     def time_span(self):

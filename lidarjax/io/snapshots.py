@@ -86,7 +86,7 @@ def _mesh_changes(p: Path, name: str, decomposed: bool) -> Path | None:
 
 
 def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_snapshots,
-                       exact_at=None):
+                       exact_at=None, grid_fallback=True):
     p = _case_dir(case)
     name = os.fspath(p)
     names = openfoam_times(p, field)
@@ -131,7 +131,7 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
         `exact_at`) the tetrahedra of the prepared points; every snapshot is then the same
         sparse mix of its own values (`PointValues`, `VertexValues`)."""
         axes, velocity, _ = resample_openfoam(of, region, spacing, check_points=0)
-        cells = cells_covering(of.bounds, axes)
+        cells = cells_covering(of.bounds, axes) if grid_fallback else np.zeros(0, np.int64)
         points = None
         if exact_at is not None:
             first = GridField(*axes, velocity if dtype is None else velocity.astype(dtype))
@@ -144,8 +144,12 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
             cells = np.union1d(cells, of.cells_in_box(lo - pad, hi + pad))
         sampler, refill = build_sampler_and_values(of.mesh, of.cell_values, of.boundary, cells,
                                                    of.bounds)
-        prepared.update(axes=axes, sampler=sampler, refill=refill,
-                        located=sampler.grid_locations(axes))
+        prepared.update(axes=axes, sampler=sampler, refill=refill)
+        if grid_fallback:
+            prepared["located"] = sampler.grid_locations(axes)
+        else:  # no grid per snapshot: two NaN nodes per axis, the graded grid's resolution
+            prepared.update(axes=[np.array([a[0], a[-1]]) for a in axes],
+                            resolution=GridField(*axes, velocity).resolution)
         if points is not None:
             tets, _ = sampler.locate(points)
             found = tets >= 0
@@ -181,7 +185,7 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
         elif of is not None:
             velocity = None
         axes, sampler = prepared["axes"], prepared["sampler"]
-        if of is None:
+        if of is None or not grid_fallback:
             velocity = np.full(tuple(a.size for a in axes) + (3,), np.nan)
         elif velocity is None:
             velocity = sampler.with_values(*prepared["refill"](of.cell_values, of.boundary)
@@ -198,7 +202,8 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
 
     def assemble(window_times, snaps):
         grid = SnapshotField(window_times, [g for g, _ in snaps])
-        return CellPointSnapshots(grid, prepared["geometry"], np.stack([e for _, e in snaps]))
+        return CellPointSnapshots(grid, prepared["geometry"], np.stack([e for _, e in snaps]),
+                                  resolution=prepared.get("resolution"))
 
     return FieldSequence(times, load, max_snapshots=max_snapshots, name=name,
                          assemble=assemble if exact_at is not None else None)
@@ -277,6 +282,7 @@ def load_field_sequence(
     dtype: Any = None,
     max_snapshots: int = 8,
     exact_at: Any = None,
+    grid_fallback: bool = True,
 ) -> FieldSequence:
     """The snapshots of an unsteady CFD run as one time-dependent field (`FieldSequence`).
 
@@ -303,6 +309,11 @@ def load_field_sequence(
       tetrahedra of the points, the cells around the grid's nodes and the point-value
       weights are found once (the mesh is the same in every snapshot); each snapshot is then
       its velocity file read once and a sparse matrix product.
+    - `grid_fallback`: with `exact_at`: False skips the graded grid of every snapshot (its
+      resampling costs several times the read of a binary velocity file): a query at a point
+      not prepared is then NaN (a LOS flagged ``BEAM_OUTSIDE``). For a run that samples only
+      its prepared points (a fixed lidar); the probe's nodes are still chosen for the graded
+      grid's resolution.
 
     A snapshot whose time directory holds a changed mesh (`polyMesh`), whose velocity cannot
     be read (missing on a processor, truncated, corrupt) or has non-finite values is NaN,
@@ -319,6 +330,9 @@ def load_field_sequence(
             Path(os.fspath(source)))):
         raise ValueError(f"{source!r}: `exact_at` applies to an OpenFOAM case (a mesh); "
                          "gridded snapshots are their own data.")
+    if not grid_fallback and exact_at is None:
+        raise ValueError("load_field_sequence: grid_fallback=False needs `exact_at` (the points "
+                         "the run samples); without them every query needs the grid.")
     if isinstance(source, (list, tuple)):
         paths = [Path(p) for p in source]
         return _files_sequence(paths, times, region=region, dtype=dtype,
@@ -339,7 +353,8 @@ def load_field_sequence(
                              f"use `time_range` to select them.")
         return _openfoam_sequence(p, field=field, region=region, spacing=spacing,
                                   time_range=time_range, dtype=dtype,
-                                  max_snapshots=max_snapshots, exact_at=exact_at)
+                                  max_snapshots=max_snapshots, exact_at=exact_at,
+                                  grid_fallback=grid_fallback)
     if p.suffix.lower() in (".nc", ".nc4", ".netcdf", ".cdf", ".h5", ".hdf5"):
         if spacing is not None or times is not None:
             raise ValueError(f"{text}: a NetCDF sequence takes its grid and times from the file;"

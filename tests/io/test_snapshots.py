@@ -173,6 +173,16 @@ def test_pimplefoam_exact_sequence_matches_probes_at_every_height():
     probes = read_openfoam_probes(DATA / "postProcessing" / "lidarProbes")
     err = _probe_errors(s, probes, lj.monitor_points(scan, mount, HEIGHTS), HEIGHTS)
     assert err.max() < 1e-5, err  # the target is 0.02 m/s at every height
+    # without the grid per snapshot (a fixed lidar samples only its prepared points): the
+    # same LOS; a query elsewhere is NaN
+    lean = load_field_sequence(DATA, region=lj.scan_bounds(scan, mount, HEIGHTS),
+                               exact_at=lj.io.simulate_points(scan, mount, HEIGHTS),
+                               grid_fallback=False)
+    s2 = lj.simulate_series(lean, scan, mount, HEIGHTS, (10.0, 20.0))
+    np.testing.assert_allclose(np.asarray(s2.los), np.asarray(s.los), rtol=0, atol=1e-12)
+    w = lean.window(0, 1)
+    assert w.resolution == seq.window(0, 1).resolution
+    assert np.isnan(np.asarray(w.sample_local_at(jnp.ones(3), 0.5))).all()
 
 
 def _transient_copy(tmp_path, keep=("10", "12", "14", "16", "18")):
