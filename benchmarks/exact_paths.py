@@ -184,12 +184,16 @@ def main() -> int:
         if args.part in ("all", "sequence"):
             seq = scratch_sequence(case, args.snapshots, tmp)
             runs = []
-            for n in (max(2, args.snapshots // 2), args.snapshots):  # memory vs length
+            for n in (max(2, args.snapshots // 4), args.snapshots):  # memory vs length
                 p = subprocess.run([sys.executable, __file__, "--child", os.fspath(seq), str(n)],
                                    capture_output=True, text=True, check=True,
                                    env={**os.environ, "PYTHONPATH": os.fspath(ROOT)})
                 runs.append(json.loads(p.stdout.strip().splitlines()[-1]))
             res["sequence"] = runs
+            a, b = runs
+            # the marginal cost of a snapshot inside simulate_series (compilation cancels)
+            res["series_marginal_snapshots_per_s"] = (b["snapshots"] - a["snapshots"]) / max(
+                b["series_s"] - a["series_s"], 1e-9)
         if args.part in ("all", "table"):
             res["table"] = table_run(case, args.rotations, tmp)
     res["load_after"] = os.getloadavg()
@@ -203,6 +207,9 @@ def main() -> int:
                      f"(x{r['ratio_to_read']:.2f} the read; target <= 1.5); simulate_series "
                      f"{r['series_s']:.1f} s = {r['snapshots_per_s']:.2f} snapshots/s; peak RSS "
                      f"{r['peak_rss_mb']:.0f} MB")
+    if "series_marginal_snapshots_per_s" in res:
+        lines.append(f"- simulate_series, marginal: {res['series_marginal_snapshots_per_s']:.1f} "
+                     "snapshots/s (the difference of the two runs; compilation cancels)")
     if "table" in res:
         t = res["table"]
         lines.append(f"- table, {t['rotations']} rotations: graded grid {t['grid_s']:.1f} s, exact "

@@ -119,10 +119,11 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
         except (OSError, ValueError, EOFError) as err:
             text = str(err).splitlines()[0] if str(err) else type(err).__name__
             raise ValueError(text if os.fspath(where) in text else f"{os.fspath(where)}: {text}") from None
-        bad = ~np.isfinite(values).all(axis=1)
-        if bad.any():
-            raise ValueError(f"{os.fspath(where / field)}: {int(bad.sum())} cell values are not "
-                             f"finite (first: cell {int(np.argmax(bad))})")
+        if not np.isfinite(np.add.reduce(values, axis=None)):  # one pass; NaN/inf propagate
+            bad = ~np.isfinite(values).all(axis=1)
+            if bad.any():
+                raise ValueError(f"{os.fspath(where / field)}: {int(bad.sum())} cell values are "
+                                 f"not finite (first: cell {int(np.argmax(bad))})")
         return OpenFOAMField(case=p, time=names[k], field=field, mesh=mesh, cell_values=values,
                              boundary=boundary)
 
@@ -185,14 +186,20 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
         elif of is not None:
             velocity = None
         axes, sampler = prepared["axes"], prepared["sampler"]
-        if of is None or not grid_fallback:
-            velocity = np.full(tuple(a.size for a in axes) + (3,), np.nan)
-        elif velocity is None:
-            velocity = sampler.with_values(*prepared["refill"](of.cell_values, of.boundary)
-                                           ).values_at(*prepared["located"])
-        if dtype is not None:
-            velocity = velocity.astype(dtype)
-        grid = GridField(*axes, velocity)
+        if not grid_fallback:  # one NaN grid of two nodes per axis, shared by every snapshot
+            if "nan_grid" not in prepared:
+                nan = np.full((2, 2, 2, 3), np.nan, dtype or np.float64)
+                prepared["nan_grid"] = GridField(*axes, nan)
+            grid = prepared["nan_grid"]
+        else:
+            if of is None:
+                velocity = np.full(tuple(a.size for a in axes) + (3,), np.nan)
+            elif velocity is None:
+                velocity = sampler.with_values(*prepared["refill"](of.cell_values, of.boundary)
+                                               ).values_at(*prepared["located"])
+            if dtype is not None:
+                velocity = velocity.astype(dtype)
+            grid = GridField(*axes, velocity)
         if "mix" not in prepared:
             return grid
         n = prepared["geometry"].n_points
