@@ -158,8 +158,18 @@ class CellPointSnapshots(AbstractField):
     `resolution` is the graded grid's all the same). Differentiable in the vertex values,
     the query position (barycentric coordinates) and the time.
 
-    Built by `CellPointSnapshots.from_geometry` (on the host, per window of a
-    `lidarjax.FieldSequence`).
+    **Arguments:**
+
+    - `grid`: the graded grid's snapshots (`lidarjax.SnapshotField`, times in seconds).
+    - `geometry`: a `CellPointField` of the prepared points (absolute CFD metres): its index,
+      tetrahedra and tolerance are shared by every snapshot (its own values are not used).
+    - `values`: ``(t, n, 4, 3)`` m/s, CFD frame: each snapshot's vertex values (cell
+      centre, base, A, B) of each point's tetrahedron; non-finite rows are NaN queries.
+    - `resolution`: metres, the graded grid's resolution where `grid` is a placeholder
+      (``grid_fallback=False``); default `grid`'s.
+
+    Built on the host, per window of a `lidarjax.FieldSequence`, by
+    `lidarjax.io.load_field_sequence` with `exact_at`.
     """
 
     grid: SnapshotField
