@@ -336,3 +336,28 @@ def test_exact_sequence_gradients_match_finite_differences_of_the_mesh():
     lo_ = eqx.tree_at(lambda f: f.values, w, jnp.asarray(vals - bump))
     fd_v = (float(moved.sample_local_at(q, t)[0]) - float(lo_.sample_local_at(q, t)[0])) / 2e-3
     assert np.isclose(fd_v, gv[0, k, :, 0].sum(), rtol=1e-8)
+
+
+def test_decomposed_sequence_missing_a_processors_time_is_flagged(tmp_path):
+    """A decomposed case whose processor 2 lacks time 200: one warning line naming that
+    processor's missing file, snapshot 200 NaN, snapshot 100 kept (exact)."""
+    import shutil
+
+    case = tmp_path / "case"
+    shutil.copytree(DATA.parents[1] / "openfoam" / "block_decomposed", case)
+    for d in sorted(case.glob("processor*")):
+        if d.name != "processor2":
+            shutil.copytree(d / "100", d / "200")
+    of = lj.io.read_openfoam_field(case, time="100")
+    lo, hi = of.bounds[0].min(axis=0), of.bounds[1].max(axis=0)
+    pts = lo + np.array([[0.3, 0.4, 0.5], [0.6, 0.2, 0.7]]) * (hi - lo)
+    seq = load_field_sequence(case, exact_at=pts, grid_fallback=False)
+    with pytest.warns(UserWarning, match=r"processor2/200/U: missing") as caught:
+        w = seq.window(0, 1)
+    assert len(caught) == 1 and "\n" not in str(caught[0].message)
+    o = np.asarray(w.origin, np.float64) + np.asarray(w.origin_lo, np.float64)
+    q = jnp.asarray(pts - o)
+    ref = sample_openfoam(case, pts, time="100")
+    t0, t1 = (float(t) for t in w.times)
+    np.testing.assert_allclose(np.asarray(w.sample_local_at(q, t0)), ref, atol=1e-10)
+    assert np.isnan(np.asarray(w.sample_local_at(q, 0.5 * (t0 + t1)))).all()
