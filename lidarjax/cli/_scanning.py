@@ -25,6 +25,7 @@ import numpy as np
 
 from .._util import atomic_path, import_optional
 from ..io import read_hpl, read_windcube_scan
+from ..io.hpl import INTENSITY_THRESHOLD, HaloScan
 from ..probe import CWProbe, PointProbe
 from ..scanning import (
     INSTRUMENTS,
@@ -165,8 +166,6 @@ def measured_los(scan):
     """``(los, title)``: a scan file's own Doppler ``(r, g)`` m/s, NaN where the instrument's
     data are rejected (a Halo file: intensity below `lidarjax.io.INTENSITY_THRESHOLD`; a
     Windcube file: its status), and a title naming the file and the rejection."""
-    from ..io.hpl import INTENSITY_THRESHOLD, HaloScan  # noqa: PLC0415
-
     name = Path(scan.path).name
     if isinstance(scan, HaloScan):
         return scan.radial_velocity(), f"measured, {name}\n(intensity < {INTENSITY_THRESHOLD:g})"
