@@ -331,6 +331,14 @@ def test_simulate_an_hour_of_vad_every_ray_at_its_own_time(case, tmp_path, capsy
     got = read_scan_netcdf(tmp_path / "series" / "series_scan.nc")
     np.testing.assert_allclose(got["ray_time"][0], seconds + 0.5, atol=2e-5)
     assert got["radial_velocity"].shape == (1, 72, 5) and np.isfinite(got["radial_velocity"]).all()
+    # one VAD profile per scan of the file (12 x 5 gates), each from its own 6 rays
+    table = read_table_csv(tmp_path / "series" / "series_vad.csv").columns
+    np.testing.assert_array_equal(table["scan"], np.repeat(np.arange(12), 5))
+    np.testing.assert_array_equal(table["n_rays"], 6)
+    np.testing.assert_allclose(table["time"][::5], got["ray_time"][0].reshape(12, 6).mean(axis=1))
+    los, az = got["radial_velocity"][0].reshape(12, 6, 5), got["azimuth"].reshape(12, 6)
+    prof = lj.scanning.vad_fit(los[7], az[7], 75.0, got["range"])  # the eighth scan alone
+    np.testing.assert_allclose(table["u"][35:40], np.asarray(prof.velocity)[:, 0], atol=1e-9)
 
 
 def test_simulate_the_real_two_scan_stare(case, tmp_path, capsys):
