@@ -319,7 +319,8 @@ def read_hpl(path: PathLike) -> HaloScan:
     per_scan_key = next((k for k in ("no. of rays in file", "no. of waypoints in file") if k in header), None)
     rays_per_scan = _int_field(p, lines, header, per_scan_key) if per_scan_key else None
     try:
-        start = _dt.datetime.strptime(header["start time"], "%Y%m%d %H:%M:%S.%f")
+        text = header["start time"]
+        start = _dt.datetime.strptime(text, "%Y%m%d %H:%M:%S.%f" if "." in text else "%Y%m%d %H:%M:%S")
     except ValueError:
         raise file_error(p, _line_of(lines, "Start time"), f"start time {header['start time']!r} is "
                          f"not 'YYYYMMDD HH:MM:SS.ss'") from None
