@@ -262,7 +262,8 @@ def test_nonfinite_snapshot_is_flagged_not_fatal(tmp_path):
     write_vector_field(case, "12", "U", values, bnd, binary=False)
     scan, mount = lj.windcube_v2(), lj.Mount([150.0, 60.0, 0.0])
     pts = lj.io.simulate_points(scan, mount, HEIGHTS[:1])
-    seq = load_field_sequence(case, exact_at=pts, region=lj.scan_bounds(scan, mount, HEIGHTS[:1]))
+    seq = load_field_sequence(case, exact_at=pts, region=lj.scan_bounds(scan, mount, HEIGHTS[:1]),
+                              grid_fallback=False)
     with pytest.warns(UserWarning, match=r"12/U: 1 cell values are not finite"):
         w = seq.window(0, 2)
     o = np.asarray(w.origin, np.float64) + np.asarray(w.origin_lo, np.float64)
@@ -288,7 +289,8 @@ def test_decomposed_and_compressed_sequences_are_exact(tmp_path, which):
     lo, hi = of.bounds[0].min(axis=0), of.bounds[1].max(axis=0)
     rng = np.random.default_rng(1)
     pts = lo + (0.2 + 0.6 * rng.random((40, 3))) * (hi - lo)
-    seq = load_field_sequence(case, exact_at=pts, region=(lo + 0.2 * (hi - lo), lo + 0.8 * (hi - lo)))
+    seq = load_field_sequence(case, exact_at=pts, grid_fallback=False,
+                              region=(lo + 0.2 * (hi - lo), lo + 0.8 * (hi - lo)))
     w = seq.window(0, 1)
     o = np.asarray(w.origin, np.float64) + np.asarray(w.origin_lo, np.float64)
     got = np.asarray(w.sample_local_at(jnp.asarray(pts - o), float(w.times[1])))
