@@ -19,3 +19,10 @@ from .placement import design_placement as design_placement
 from .placement import evaluate_candidates as evaluate_candidates
 from .placement import placement_objective as placement_objective
 from .placement import placement_problem as placement_problem
+from .scanning import DualDopplerDesign as DualDopplerDesign
+from .scanning import RegionRing as RegionRing
+from .scanning import VadDesign as VadDesign
+from .scanning import design_dual_doppler as design_dual_doppler
+from .scanning import design_vad as design_vad
+from .scanning import dual_doppler_variance as dual_doppler_variance
+from .scanning import vad_variance as vad_variance
