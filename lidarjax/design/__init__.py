@@ -16,7 +16,7 @@ from .placement import Placement as Placement
 from .placement import RegionBox as RegionBox
 from .placement import RegionPolygon as RegionPolygon
 from .placement import design_placement as design_placement
-from .placement import evaluate_candidates as evaluate_candidates
+from .placement import evaluate_placements as evaluate_placements
 from .placement import placement_objective as placement_objective
 from .placement import placement_problem as placement_problem
 from .scanning import DualDopplerDesign as DualDopplerDesign

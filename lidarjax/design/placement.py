@@ -74,7 +74,7 @@ from ..sensitivity import _covariance, _expand, _jacobian_one, _map_sectors
 from . import _search
 
 __all__ = ["RegionBox", "RegionPolygon", "Placement", "design_placement", "placement_problem",
-           "placement_objective", "evaluate_candidates", "OBJECTIVES"]
+           "placement_objective", "evaluate_placements", "OBJECTIVES"]
 
 OBJECTIVES = ("worst", "rms", "uncertainty")
 _SMOOTHING = ("pnorm", "lse")
@@ -641,7 +641,7 @@ def placement_objective(problem, x: Float[ArrayLike, " d"]):
 _objective_jit = eqx.filter_jit(_objective)
 
 
-def evaluate_candidates(problem, xs: Float[ArrayLike, "m d"], *, batch_size: int = 256):
+def evaluate_placements(problem, xs: Float[ArrayLike, "m d"], *, batch_size: int = 256):
     """``(values, feasible)`` ``(m,)`` of the placement objective at every row of `xs` (a grid
     search, a map of the objective over the region): one compiled program, `batch_size`
     candidates at a time; infeasible candidates get NaN."""
