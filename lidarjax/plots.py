@@ -334,19 +334,22 @@ def plot_design(placement, path, *, grid_xy=None, grid_values=None, title=None,
     coarse stage's candidates, or `grid_xy` ``(m, 2)`` / `grid_values` ``(m,)`` of a finer
     map, NaN where infeasible), the start, the local search's path and the optimum (left);
     the speed correction ``C_U`` against the free-stream direction at the start and at the
-    optimum, one line per height (right). `outline`: ``(n, 2)`` a polygon to draw."""
+    optimum, first and last height (right). `outline`: ``(n, 2)`` a polygon to draw."""
     plt = _pyplot()
-    fig = plt.figure(figsize=(11, 5))
-    ax = fig.add_subplot(1, 2, 1)
+    fig, (ax, rax) = plt.subplots(1, 2, figsize=(12, 5), gridspec_kw={"width_ratios": [1, 1.1]})
     names = list(placement.names)
     if grid_xy is None:
         grid_xy, grid_values = placement.coarse[:, :2], placement.coarse_values
     xy = np.asarray(grid_xy, np.float64)
     v = np.asarray(grid_values, np.float64)
     ok = np.isfinite(v)
-    sc = ax.scatter(xy[ok, 0], xy[ok, 1], c=v[ok], s=12, cmap="viridis", marker="s")
-    ax.scatter(xy[~ok, 0], xy[~ok, 1], c="0.8", s=8, marker="x", label="infeasible")
-    fig.colorbar(sc, ax=ax, label="objective")
+    if ok.sum() >= 16:
+        art = ax.tricontourf(xy[ok, 0], xy[ok, 1], v[ok], levels=24, cmap="viridis")
+    else:
+        art = ax.scatter(xy[ok, 0], xy[ok, 1], c=v[ok], s=30, cmap="viridis")
+    if (~ok).any():
+        ax.scatter(xy[~ok, 0], xy[~ok, 1], c="0.5", s=6, marker="x", label="infeasible")
+    fig.colorbar(art, ax=ax, label="objective")
     if outline is not None:
         o = np.asarray(outline, np.float64)
         ax.plot(np.append(o[:, 0], o[0, 0]), np.append(o[:, 1], o[0, 1]), "k-", lw=0.8)
@@ -358,22 +361,22 @@ def plot_design(placement, path, *, grid_xy=None, grid_values=None, title=None,
     ax.set_xlabel(f"{names[0]} (m)")
     ax.set_ylabel(f"{names[1] if len(names) > 1 else ''} (m)")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="lower right", framealpha=0.8)
     ax.set_title("objective over the region", fontsize=10)
     if placement.rose is not None and placement.rose_start is not None:
-        pax = fig.add_subplot(1, 2, 2, projection="polar")
-        pax.set_theta_zero_location("N")
-        pax.set_theta_direction(-1)
         for rose, style, lab in ((placement.rose_start, "--", "start"),
                                  (placement.rose, "-", "optimum")):
             d = np.asarray(rose.directions)
-            th = np.radians(np.append(d, d[0]))
             r = np.asarray(rose.speed_ratio)
-            for j in range(r.shape[1]):
-                pax.plot(th, np.append(r[:, j], r[0, j]), style, lw=1.0, color=f"C{j}",
-                         label=f"{lab}, height {j}" if j in (0, r.shape[1] - 1) else None)
-        pax.set_title("C_U = U_free / U_lidar against free-stream direction", fontsize=10,
-                      pad=18)
-        pax.legend(loc="lower left", bbox_to_anchor=(-0.3, -0.2), fontsize=7)
-    fig.suptitle(title or "lidar placement design", y=1.02)
+            for j in sorted({0, r.shape[1] - 1}):
+                rax.plot(d, r[:, j], style, marker="o", ms=3, lw=1.2, color=f"C{j and 1}",
+                         label=f"{lab}, height {j + 1} of {r.shape[1]}")
+        rax.axhline(1.0, color="0.6", lw=0.8)
+        rax.set_xlabel("free-stream direction (deg)")
+        rax.set_ylabel("C_U = U_free / U_lidar")
+        rax.set_xlim(-5, 365)
+        rax.legend(fontsize=7)
+        rax.set_title("speed correction at the start and at the optimum", fontsize=10)
+    fig.suptitle(title or "lidar placement design")
+    fig.tight_layout()
     return _save(fig, path)

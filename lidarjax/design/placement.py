@@ -691,6 +691,7 @@ def design_placement(
     solver=None,
     max_steps: int = 60,
     batch_size: int = 64,
+    fast_compile: bool = True,
     progress=None,
     ratio_tol: float = DEFAULT_RATIO_TOL,
 ) -> Placement:
@@ -722,6 +723,9 @@ def design_placement(
     - `solver`: an `optimistix.AbstractMinimiser` with ``init/step/terminate`` (default
       ``optimistix.BFGS(rtol=1e-6, atol=1e-9)``); `max_steps`: steps per local search.
     - `batch_size`: coarse candidates evaluated at once.
+    - `fast_compile`: on a CPU, compile the search's one program with XLA's quick code
+      generation (about 3x faster to compile, slower to run; the search runs in a fraction of
+      a second, its compilation takes tens: `lidarjax.design._search.FAST_CPU_OPTIONS`).
     - `progress`: a progress meter (`lidarjax.progress_meter`).
 
     **Returns:** a `Placement`. Raises `ValueError` before compiling for an empty region, a
@@ -745,7 +749,7 @@ def design_placement(
     try:
         res = _search.search(_objective, problem, lo, hi, x_init=x_init, n_coarse=n_coarse,
                              n_starts=n_starts, solver=solver, max_steps=max_steps,
-                             batch_size=batch_size)
+                             batch_size=batch_size, fast_compile=fast_compile)
         meter.update(task, 1)
     finally:
         meter.close(task)

@@ -149,22 +149,22 @@ def test_all_solid_region_and_non_finite_objective_are_flagged():
     scene = lj.scenes.hemisphere(radius=R)
     m = lj.Mount([0.0, 0.0, 5.0])
     inside = RegionBox((-5.0, -5.0, 2.0), (5.0, 5.0, 8.0))
-    res = design_placement(scene, lj.windcube_v1(), m, HEIGHTS, inside, directions=[270.0],
+    res = design_placement(scene, lj.windcube_v1(), m, [10.0], inside, directions=[270.0],
                            n_coarse=8, n_starts=2, max_steps=5)
     assert not res.feasible and not res.converged
     assert np.all(np.isnan(res.location)) and np.isnan(res.value)
     assert "infeasible" in res.message
-    res = design_placement(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 21.0]), HEIGHTS,
+    res = design_placement(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 21.0]), [10.0],
                            RegionBox((-5.0, -5.0, 21.0), (5.0, 5.0, 21.0)), directions=[270.0],
                            objective=lambda sim: jnp.nan * jnp.sum(sim.lidar_speed), n_coarse=8,
                            n_starts=2, max_steps=5)
     assert not res.feasible and np.all(np.isnan(res.x))
     # a clearance larger than the distance to the dome makes the low candidates infeasible
-    problem = placement_problem(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 21.0]), HEIGHTS,
+    problem = placement_problem(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 21.0]), [10.0],
                                 RegionBox((-5.0, -5.0, 21.0), (5.0, 5.0, 21.0)),
                                 directions=[270.0], min_clearance=2.0)[0]
     assert not bool(placement_objective(problem, [0.0, 0.0])[1])  # 1 m above the top
-    problem = placement_problem(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 21.0]), HEIGHTS,
+    problem = placement_problem(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 21.0]), [10.0],
                                 RegionBox((-5.0, -5.0, 21.0), (5.0, 5.0, 21.0)),
                                 directions=[270.0], min_clearance=0.5)[0]
     assert bool(placement_objective(problem, [0.0, 0.0])[1])
