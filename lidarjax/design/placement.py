@@ -217,13 +217,17 @@ def _inside_polygon(v, x, y):
     return jnp.sum(crosses & (x < xc)) % 2 == 1
 
 
+def box_location(base, free, x):
+    """The point of a `RegionBox`: `base` ``(3,)`` with coordinates `free` set from `x`."""
+    loc = jnp.asarray(base, x.dtype)
+    for k, i in enumerate(free):
+        loc = loc.at[i].set(x[k])
+    return loc
+
+
 def _location(pb: _Problem, x):
-    n = len(pb.free)
     if pb.kind == "box":
-        loc = pb.base
-        for k, i in enumerate(pb.free):
-            loc = loc.at[i].set(x[k])
-        return loc, jnp.asarray(True)
+        return box_location(pb.base, pb.free, x), jnp.asarray(True)
     px, py = x[0], x[1]
     if pb.surface_kind == "grid":
         zs = _bilinear(pb.surface_axes[0], pb.surface_axes[1], pb.surface_table, px, py)
@@ -231,7 +235,6 @@ def _location(pb: _Problem, x):
         zs = jnp.asarray(pb.surface_fn(px, py), x.dtype)
     else:
         zs = pb.base[2]
-    del n
     return jnp.stack([px, py, zs + pb.height]), _inside_polygon(pb.vertices, px, py)
 
 

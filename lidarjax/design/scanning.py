@@ -37,7 +37,7 @@ from ..mount import Mount
 from ..scanning.dual import _dual, _geometry
 from ..scanning.profiles import _vad
 from . import _search
-from .placement import RegionBox
+from .placement import RegionBox, box_location
 
 __all__ = ["RegionRing", "DualDopplerDesign", "design_dual_doppler", "dual_doppler_variance",
            "VadDesign", "design_vad", "vad_variance"]
@@ -80,10 +80,7 @@ def _region_location(region, x):
         c = jnp.asarray(region.centre, x.dtype)
         return jnp.stack([c[0] + region.distance * jnp.sin(b),
                           c[1] + region.distance * jnp.cos(b), jnp.asarray(region.z, x.dtype)])
-    loc = jnp.asarray(region.lo, x.dtype)
-    for k, i in enumerate(region.free):
-        loc = loc.at[i].set(x[k])
-    return loc
+    return box_location(region.lo, region.free, x)
 
 
 class _DualProblem(eqx.Module):
