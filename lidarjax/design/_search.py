@@ -23,9 +23,12 @@ import optimistix as optx
 INFEASIBLE = 1e30
 
 
-def default_solver() -> optx.AbstractMinimiser:
+def default_solver(dtype=None) -> optx.AbstractMinimiser:
     """BFGS with a backtracking Armijo line search, tolerances ``rtol = 1e-6``, ``atol = 1e-9``
-    (on the unbounded variables and the objective)."""
+    (on the unbounded variables and the objective) in float64, ``1e-4`` and ``1e-6`` in float32
+    (whose rounding of the objective is about 1e-7 relative)."""
+    if dtype is not None and jnp.finfo(dtype).bits < 64:
+        return optx.BFGS(rtol=1e-4, atol=1e-6)
     return optx.BFGS(rtol=1e-6, atol=1e-9)
 
 

@@ -724,7 +724,7 @@ def design_placement(
     - `n_coarse`: about how many locations the coarse stage evaluates (a regular grid over
       the decision variables); `n_starts`: local searches from the best of them.
     - `solver`: an `optimistix.AbstractMinimiser` with ``init/step/terminate`` (default
-      ``optimistix.BFGS(rtol=1e-6, atol=1e-9)``); `max_steps`: steps per local search.
+      ``optimistix.BFGS(rtol=1e-6, atol=1e-9)``, looser in float32); `max_steps`: steps per local search.
     - `batch_size`: coarse candidates evaluated at once.
     - `fast_compile`: on a CPU, compile the search's one program with XLA's quick code
       generation (about 3x faster to compile, slower to run; the search runs in a fraction of
@@ -740,13 +740,13 @@ def design_placement(
                       ("batch_size", batch_size)):
         if int(val) != val or val < 1:
             raise ValueError(f"{fname}: `{name}` must be a positive integer, got {val!r}.")
-    solver = _search.default_solver() if solver is None else solver
     problem, lo, hi, x_init, names = placement_problem(
         field, scan, mount, heights, region, u_ref=u_ref, directions=directions,
         rotations=rotations, pivot=pivot, weights=weights, objective=objective,
         smoothing=smoothing, p=p, temperature=temperature, direction_weight=direction_weight,
         std=std, min_clearance=min_clearance, cone_angle=cone_angle, heading=heading,
         probe=probe, ratio_tol=ratio_tol, fname=fname)
+    solver = _search.default_solver(lo.dtype) if solver is None else solver
     meter = progress_meter(progress)
     task = meter.start(1, "design placement (compile and search)", unit="search")
     try:

@@ -225,7 +225,7 @@ def design_dual_doppler(
                       jnp.asarray(sigma, dtype), jnp.asarray(w, dtype), region_a, region_b,
                       len(region_a.names))
     res = _search.search(_dual_objective, pb, lo, hi, n_coarse=n_coarse, n_starts=n_starts,
-                         solver=_search.default_solver() if solver is None else solver,
+                         solver=_search.default_solver(dtype) if solver is None else solver,
                          max_steps=max_steps, batch_size=256)
     n_eval = int(res["n_evaluations"])
     if not res["feasible"]:
@@ -391,7 +391,7 @@ def design_vad(
                       move_time)
     dt = pb.heights.dtype
     lo, hi = jnp.asarray([lo_e], dt), jnp.asarray([hi_e], dt)
-    solver = _search.default_solver() if solver is None else solver
+    solver = _search.default_solver(dt) if solver is None else solver
     counts = [int(n) for n in np.atleast_1d(n_rays)]
     results = []
     for n in counts:

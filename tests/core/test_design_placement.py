@@ -203,3 +203,16 @@ def test_openfoam_roof_case_against_grid_search(openfoam_roof):
     assert res.n_evaluations * 10 <= grid.shape[0]
     # on the roof: 38 m + 1 m (the grid's first fluid node above the roof is at 38 m)
     assert 38.5 <= res.location[2] <= 41.0
+
+
+def test_float32_results_follow_the_field():
+    """A float32 scene gives a float32 optimum (the default solver's tolerances follow it),
+    feasible and no worse than its start."""
+    scene = lj.scenes.hemisphere(radius=R, speed=10.0, dtype=np.float32)
+    res = design_placement(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 22.0]),
+                           np.array([10.0, 40.0], np.float32),
+                           RegionBox((-8.0, -8.0, 22.0), (8.0, 8.0, 22.0)),
+                           directions=[0.0, 90.0, 180.0, 270.0], n_coarse=9, n_starts=2,
+                           max_steps=10)
+    assert res.x.dtype == np.float32 and res.feasible
+    assert res.value <= res.start_value
