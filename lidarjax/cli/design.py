@@ -114,6 +114,10 @@ def register(sub) -> None:
     des.add_argument("--height-above-surface", type=finite_float, default=1.0,
                      help="polygon regions: the lidar's height above the surface, m (default 1)")
     des.add_argument("--objective", choices=("worst", "rms", "uncertainty"), default="worst")
+    des.add_argument("--target", choices=("free", "point"), default="free",
+                     help="correct to the free stream (--u-ref; default) or to the true wind "
+                          "straight above the lidar (the distortion alone, when the inflow "
+                          "carries a profile)")
     des.add_argument("--p", type=positive_float, default=8.0,
                      help="worst case: the p-norm surrogate's exponent (default 8)")
     des.add_argument("--direction-weight", type=positive_float, default=0.01,
@@ -218,7 +222,8 @@ def run(args) -> int:
     mount = Mount(location, beta=beta, gamma=settings.gamma, psi=settings.psi,
                   epsilon=settings.epsilon)
     common = dict(u_ref=args.u_ref, rotations=rotations, pivot=pivot, weights=weights,
-                  objective=args.objective, p=args.p, direction_weight=args.direction_weight,
+                  objective=args.objective, target=args.target, p=args.p,
+                  direction_weight=args.direction_weight,
                   std=std, min_clearance=args.min_clearance, cone_angle=args.optimise_cone,
                   heading=args.optimise_heading, probe=probe)
     t1 = time.perf_counter()

@@ -190,6 +190,7 @@ class _Problem(eqx.Module):
     has_cone: bool = eqx.field(static=True)
     has_heading: bool = eqx.field(static=True)
     objective: str | Callable = eqx.field(static=True)
+    target: str = eqx.field(static=True)  # "free" (cff_*) or "point" (cfp_*)
     smoothing: str = eqx.field(static=True)
     names: tuple = eqx.field(static=True)
     ratio_tol: float = eqx.field(static=True)
@@ -273,7 +274,7 @@ def _clearance_ok(pb: _Problem, loc):
 def _simulations(pb: _Problem, scan, mount) -> Simulation:
     def one(f, m, u):
         return _simulate(f, scan, m, pb.heights, u, pb.probe, pb.ratio_tol,
-                         point_reference=False)
+                         point_reference=pb.target == "point")
 
     return _map_sectors(one, pb.field, mount, pb.u_refs, pb.axes)
 
@@ -298,11 +299,12 @@ def _objective(pb: _Problem, x):
     feasible = inside & _clearance_ok(pb, loc)
     used = pb.weights > 0
     if pb.objective == "uncertainty":
-        cfg = (pb.names, ("cff_U", "cff_th"), False, False, pb.ratio_tol)
+        cu, cth = ("cfp_U", "cfp_th") if pb.target == "point" else ("cff_U", "cff_th")
+        cfg = (pb.names, (cu, cth), False, pb.target == "point", pb.ratio_tol)
 
         def one(f, m, u):
             value, jac = _jacobian_one(f, scan, m, pb.heights, u, pb.probe, cfg)
-            return value["cff_U"], value["cff_th"], jac["cff_U"]
+            return value[cu], value[cth], jac[cu]
 
         c_u, c_th, jac = _map_sectors(one, pb.field, mount, pb.u_refs, pb.axes)
         ok = jnp.isfinite(c_u) & jnp.all(jnp.isfinite(jac), axis=-1)
@@ -311,7 +313,8 @@ def _objective(pb: _Problem, x):
         free_dir = _free_directions(pb, mount)
     else:
         sims = _simulations(pb, scan, mount)
-        c_u, c_th = sims.cff_U, sims.cff_th
+        c_u, c_th = (sims.cfp_U, sims.cfp_th) if pb.target == "point" else (sims.cff_U,
+                                                                            sims.cff_th)
         free_dir = wind_direction(sims.free_velocity)
         if callable(pb.objective):
             value = jnp.asarray(pb.objective(sims))
@@ -380,11 +383,11 @@ class Placement(eqx.Module):
     coarse_values: np.ndarray
 
 
-def _rose(cff_u, cff_th, directions) -> CorrectionRose:
+def _rose(cff_u, cff_th, directions, target="free") -> CorrectionRose:
     d = np.mod(np.asarray(directions, np.float64), 360.0)
     order = np.argsort(d)
     return CorrectionRose(jnp.asarray(d[order]), jnp.asarray(np.asarray(cff_u)[order]),
-                          jnp.asarray(np.asarray(cff_th)[order]), "free", "free", False)
+                          jnp.asarray(np.asarray(cff_th)[order]), "free", target, False)
 
 
 def _surface_table(field: GridField):
@@ -510,7 +513,7 @@ def _bounds_arg(fname, name, value):
 
 
 def placement_problem(field, scan, mount, heights, region, *, u_ref=None, directions=None,
-                      rotations=None, pivot=None, weights=None, objective="worst",
+                      rotations=None, pivot=None, weights=None, objective="worst", target="free",
                       smoothing="pnorm", p=8.0, temperature=0.005, direction_weight=0.01,
                       std=None, min_clearance=0.0, cone_angle=None, heading=None, probe=None,
                       ratio_tol=DEFAULT_RATIO_TOL, fname="design_placement"):
@@ -522,6 +525,9 @@ def placement_problem(field, scan, mount, heights, region, *, u_ref=None, direct
     if not (isinstance(objective, str) and objective in OBJECTIVES) and not callable(objective):
         raise ValueError(f"{fname}: `objective` must be one of {OBJECTIVES} or a function of "
                          f"the Simulation, got {objective!r}.")
+    if target not in ("free", "point"):
+        raise ValueError(f"{fname}: `target` must be 'free' (C_U, C_th to the free stream) or "
+                         f"'point' (to the wind above the lidar), got {target!r}.")
     if smoothing not in _SMOOTHING:
         raise ValueError(f"{fname}: `smoothing` must be one of {_SMOOTHING}, got {smoothing!r}.")
     for name, val, low in (("p", p, 1.0), ("temperature", temperature, 0.0),
@@ -630,7 +636,7 @@ def placement_problem(field, scan, mount, heights, region, *, u_ref=None, direct
         direction_weight=jnp.asarray(direction_weight, dtype), chol=chol, probe=probe,
         axes=axes, kind=kind, surface_kind=surface_kind, surface_fn=surface_fn,
         free=tuple(region.free), has_cone=cone_b is not None, has_heading=head_b is not None,
-        objective=objective, smoothing=smoothing, names=in_names, ratio_tol=float(ratio_tol))
+        objective=objective, target=target, smoothing=smoothing, names=in_names, ratio_tol=float(ratio_tol))
     return problem, jnp.asarray(lo, dtype), jnp.asarray(hi, dtype), x_init, tuple(names)
 
 
@@ -680,6 +686,7 @@ def design_placement(
     pivot: Float[ArrayLike, " 2"] | None = None,
     weights: Float[ArrayLike, " s"] | None = None,
     objective: str | Callable[[Simulation], Array] = "worst",
+    target: str = "free",
     smoothing: str = "pnorm",
     p: float = 8.0,
     temperature: float = 0.005,
@@ -716,6 +723,9 @@ def design_placement(
       batched `Simulation`; `smoothing` (``"pnorm"``/``"lse"``), `p`, `temperature`:
       the worst case's smooth surrogate; `direction_weight`: weight of a degree of direction
       error against a unit speed ratio error (1/deg).
+    - `target`: ``"free"`` (default: ``C_U``, ``C_th`` to the free stream, `Simulation.cff_U`)
+      or ``"point"`` (to the true wind straight above the lidar, `Simulation.cfp_U`: the
+      distortion alone, where the free stream also carries an inflow profile's shear).
     - `std`: ``{input: standard uncertainty}`` for ``"uncertainty"`` (`lidarjax.uncertainty`'s
       installation inputs: ``epsilon``, ``pitch``, ``roll``, ``location``, ...).
     - `min_clearance`: metres of fluid required around the lidar.
@@ -742,7 +752,7 @@ def design_placement(
             raise ValueError(f"{fname}: `{name}` must be a positive integer, got {val!r}.")
     problem, lo, hi, x_init, names = placement_problem(
         field, scan, mount, heights, region, u_ref=u_ref, directions=directions,
-        rotations=rotations, pivot=pivot, weights=weights, objective=objective,
+        rotations=rotations, pivot=pivot, weights=weights, objective=objective, target=target,
         smoothing=smoothing, p=p, temperature=temperature, direction_weight=direction_weight,
         std=std, min_clearance=min_clearance, cone_angle=cone_angle, heading=heading,
         probe=probe, ratio_tol=ratio_tol, fname=fname)
@@ -777,6 +787,6 @@ def design_placement(
         "the local search stopped at max_steps; the best feasible point found is reported")
     return Placement(names, res["x"], np.asarray(loc, np.float64), res["value"],
                      np.asarray(res["gradient"], np.float64), worst, rms, res["start"],
-                     res["start_value"], res["path"], res["path_values"], _rose(u0, th0, d0),
-                     _rose(u1, th1, d1), n_eval, n_eval * s, int(res["n_coarse"]), True,
+                     res["start_value"], res["path"], res["path_values"], _rose(u0, th0, d0, target),
+                     _rose(u1, th1, d1, target), n_eval, n_eval * s, int(res["n_coarse"]), True,
                      converged, msg, res["coarse"], res["coarse_values"])

@@ -216,3 +216,27 @@ def test_float32_results_follow_the_field():
                            max_steps=10)
     assert res.x.dtype == np.float32 and res.feasible
     assert res.value <= res.start_value
+
+
+def test_point_target_rms_equals_simulate():
+    """``target="point"``, ``objective="rms"``: the weighted RMS over directions and heights
+    of ``sqrt((cfp_U - 1)^2 + (0.01 cfp_th)^2)`` from `lidarjax.simulate` run direction by
+    direction (an independent loop)."""
+    scene = lj.scenes.hemisphere(radius=R, speed=10.0)
+    dirs = np.array([0.0, 100.0, 230.0])
+    w = np.array([1.0, 2.0, 3.0])
+    problem = placement_problem(scene, lj.windcube_v1(), lj.Mount([0.0, 0.0, 21.0]), HEIGHTS,
+                                RegionPolygon(SQUARE, height=1.0, surface=dome), directions=dirs,
+                                weights=w, objective="rms", target="point")[0]
+    x = np.array([5.0, -2.0])
+    z = float(dome(5.0, -2.0)) + 1.0
+    e2 = []
+    for d in dirs:
+        sim = lj.simulate(lj.scenes.hemisphere(radius=R, speed=10.0, direction=d),
+                          lj.windcube_v1(), lj.Mount([5.0, -2.0, z]), HEIGHTS)
+        e2.append(np.mean((np.asarray(sim.cfp_U) - 1) ** 2
+                          + (0.01 * np.asarray(sim.cfp_th)) ** 2))
+    want = np.sqrt(np.sum(w / w.sum() * np.array(e2)))
+    value, ok = placement_objective(problem, x)
+    assert bool(ok)
+    np.testing.assert_allclose(float(value), want, rtol=1e-12)
