@@ -51,6 +51,7 @@ from .probe import (
     CWProbe,
     PointProbe,
     PulsedProbe,
+    host_nodes,
     host_weighting,
     probe_for_ranges,
 )
@@ -609,12 +610,12 @@ def gate_quadrature(probe, ranges, rule):
     weight 0; each gate's weights sum to 1."""
     r = np.asarray(ranges, np.float64).reshape(-1)
     if rule is None:
-        offsets, weights = probe._host_nodes(r)
+        offsets, weights = host_nodes(probe, r)
     else:
         m, half = rule
         h = (r[1] - r[0]) / m
         offsets = np.broadcast_to((np.arange(2 * half + 1) - half) * h, (r.size, 2 * half + 1))
-        weights = probe._host_weight(offsets)
+        weights = host_weighting(probe, offsets, r[:, None])[0]
     weights = np.where(np.abs(offsets) < r[:, None], weights, 0.0)
     total = weights.sum(axis=-1, keepdims=True)
     return np.array(offsets), weights / np.where(total > 0, total, 1.0)

@@ -100,7 +100,7 @@ from scipy import special
 from ._precision import default_float, is_concrete
 from ._util import compiled
 
-__all__ = ["AbstractProbe", "PointProbe", "PulsedProbe", "CWProbe", "host_weighting",
+__all__ = ["AbstractProbe", "PointProbe", "PulsedProbe", "CWProbe", "host_nodes", "host_weighting",
            "probe_for_spacing", "probe_transfer"]
 
 #: Speed of light in vacuum, m/s (for converting pulse durations to lengths).
@@ -682,6 +682,15 @@ def probe_for_ranges(probe: AbstractProbe, resolution, ranges, *, caller: str = 
             f"even with {refined.n_nodes} nodes). Give a coarser resolution or an explicit "
             f"n_nodes.", stacklevel=3)
     return refined
+
+
+def host_nodes(probe: AbstractProbe, focus_range) -> tuple[np.ndarray, np.ndarray]:
+    """The quadrature of `probe` on the host (float64 numpy, concrete numbers): ``(offsets,
+    weights)`` ``(..., q)`` for focus ranges ``(...)``, as `AbstractProbe.nodes` computes
+    them in the working dtype. `PulsedProbe` and `CWProbe`."""
+    if not hasattr(probe, "_host_nodes"):
+        raise ValueError(f"host_nodes: no host form for {type(probe).__name__}.")
+    return probe._host_nodes(np.asarray(focus_range, np.float64))
 
 
 def host_weighting(probe: AbstractProbe, offsets, focus_range) -> tuple[np.ndarray, np.ndarray]:
