@@ -209,8 +209,11 @@ def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractPr
     - `mount`: the lidar's `Mount` (one or a batch). With it, each height gets the nodes
       the field's spacing *along its beams' support* needs
       (`AbstractField.spacing_at`): the spacing that all but `SUPPORT_SHARE` of the cut
-      weighting sees, over every beam (and every mount of a batch) at that height, the rest
-      held to ``TRANSFER_TOL - 2 SUPPORT_SHARE``. On a mesh graded to the wall, heights
+      weighting sees, over every beam (and every mount of a batch) at that height, rounded
+      down to quarter octaves above the field's finest spacing (heights on one rung share
+      one choice), the rule held to ``TRANSFER_TOL - 2 SUPPORT_SHARE`` where that spacing is
+      coarser than the finest (a wave in the finer share moves a LOS by at most twice its
+      weight). On a mesh graded to the wall, heights
       whose beams see coarse cells get fewer nodes. Where every height would get the count
       of the field's finest spacing (uniform grids, scenes), this is the single count of
       `AbstractField.resolution`, exactly as without a mount. Otherwise the result is a
@@ -220,7 +223,8 @@ def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractPr
 
     The one place `simulate`, `simulate_rotations`, `sensitivity`, `uncertainty`, the
     response tables built from them and the series choose nodes (`beam_points` prepares the
-    same). An explicit node count (``PulsedProbe(n_nodes=17)``, `with_nodes`) wins, and so
+    same; the series and a CW or pulsed probe flown with a platform motion pass no mount:
+    one count, the finest spacing's, at every height). An explicit node count (``PulsedProbe(n_nodes=17)``, `with_nodes`) wins, and so
     do the point probe, a field that states no length scale (uniform, linear and power-law
     scenes: the probe's default count) and traced inputs. The choice is memoised: the same
     field and heights give the same static node counts, so nothing recompiles.
