@@ -223,8 +223,8 @@ def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractPr
 
     The one place `simulate`, `simulate_rotations`, `sensitivity`, `uncertainty`, the
     response tables built from them and the series choose nodes (`beam_points` prepares the
-    same; the series and a CW or pulsed probe flown with a platform motion pass no mount:
-    one count, the finest spacing's, at every height). An explicit node count (``PulsedProbe(n_nodes=17)``, `with_nodes`) wins, and so
+    same; the series pass no mount: one count, the finest spacing's, at every height). An
+    explicit node count (``PulsedProbe(n_nodes=17)``, `with_nodes`) wins, and so
     do the point probe, a field that states no length scale (uniform, linear and power-law
     scenes: the probe's default count) and traced inputs. The choice is memoised: the same
     field and heights give the same static node counts, so nothing recompiles.
