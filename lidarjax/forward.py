@@ -17,57 +17,23 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._precision import difference, is_concrete
 from .angles import horizontal_speed, wind_direction
+from .beam import beam_los, probe_for_field, profile_geometry
 from .corrections import DEFAULT_RATIO_TOL, correction_factors
 from .field import AbstractField
 from .flags import Flag
 from .frames import (
     cfd_to_north_rotation,
-    lidar_to_cfd_rotation,
     lidar_to_north_rotation,
     rotate,
     tilt_rotation,
 )
 from .mount import Mount
-from .probe import AbstractProbe, PointProbe, _beam_los, probe_for_ranges
+from .probe import AbstractProbe, PointProbe
 from .scan import ILL_CONDITIONED, Scan, reconstruct
 from .scanning.pattern import ScanPattern
 from .scanning.simulate import ScanResult, simulate_scan
 
 __all__ = ["Simulation", "simulate", "probe_for_field"]
-
-
-def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractProbe,
-                    *, caller: str = "probe_for_field") -> AbstractProbe:
-    """The probe `field` is sampled with: `probe` with its quadrature nodes chosen for the
-    field's resolution (`AbstractField.resolution`: a grid's or turbulence box's spacing, a
-    scene's smallest length scale) at the focus ranges of `scan` at `heights` (m), by
-    `lidarjax.probe.probe_for_spacing` (transfer function within 0.01 of the weighting's up
-    to the field's Nyquist wavenumber, fewest nodes).
-
-    The one place `simulate`, `simulate_rotations`, `sensitivity`, `uncertainty`, the
-    response tables built from them and the series choose nodes. An explicit node count
-    (``PulsedProbe(n_nodes=17)``, `with_nodes`) wins, and so do the point probe, a field
-    that states no length scale (uniform, linear and power-law scenes: the probe's default
-    count) and traced inputs. The choice is cached: the same field and heights give the same
-    static node count, so nothing recompiles. Warns (naming `caller`) when no node count up
-    to `lidarjax.probe.MAX_NODES` reaches the tolerance."""
-    if isinstance(probe, PointProbe) or not getattr(probe, "auto_nodes", False):
-        return probe
-    try:
-        resolution = field.resolution
-        if resolution is None:
-            return probe
-        ranges = np.asarray(_focus_ranges(scan, jnp.atleast_1d(jnp.asarray(heights))), np.float64)
-    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-        return probe
-    return probe_for_ranges(probe, resolution, ranges, caller=caller)
-
-
-@eqx.filter_jit
-def _focus_ranges(scan, heights):
-    """Focus ranges ``(h, b)`` of `scan`'s beams at `heights`, as `simulate` computes them (one
-    compiled call: `probe_for_field` runs on every `simulate` call)."""
-    return heights[:, None] / scan.directions()[None, :, 2]
 
 
 class Simulation(eqx.Module):
@@ -238,7 +204,7 @@ def simulate(
     if probe is None:
         probe = PointProbe()
     _validate(field, scan, mount, heights, u_ref, probe)
-    probe = probe_for_field(field, scan, heights, probe, caller="simulate")
+    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller="simulate")
     heights = jnp.atleast_1d(jnp.asarray(heights))
     if not jnp.issubdtype(heights.dtype, jnp.floating):
         heights = heights.astype(field.dtype)
@@ -269,12 +235,9 @@ def _simulate_traced(field, scan, mount, heights, u_ref, probe, ratio_tol, *, po
     origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo, dtype)
     scan = jax.tree_util.tree_map(cast, scan)
     angles = jax.tree_util.tree_map(cast, mount)
-    n_body = scan.directions()  # (b, 3), instrument axes
     tilt = tilt_rotation(angles.pitch, angles.roll)  # body -> level lidar frame
-    to_cfd = lidar_to_cfd_rotation(angles)
-    n_cfd = rotate(to_cfd @ tilt, n_body)
-    ranges = heights[:, None] / n_body[None, :, 2]  # (h, b): h / cos(cone), as if level
-    los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)
+    n_cfd, ranges = profile_geometry(scan, mount, heights)  # (b, 3), (h, b): h / cos(cone)
+    los, truncated = beam_los(field, origin_local, n_cfd, ranges, probe)
 
     # NaN (beams outside the field or in a solid) is masked out of every computation below
     # and put back into the results last (the safe_mask pattern): finite results keep

@@ -142,7 +142,8 @@ def _simulate_nodes(args, settings, betas, heights, scan, probe):
                          "probe volume; add --probe pulsed or --probe cw")
     if args.probe_nodes is not None:
         raise ValueError("--probe-nodes fixes the node count; drop it or drop --field/--resolution")
-    if args.resolution is not None:
+    mounts = settings_mount(settings, betas)
+    if args.resolution is not None:  # one spacing everywhere: one count (no mount needed)
         chosen = {b: probe_for_field(types.SimpleNamespace(resolution=args.resolution), scan,
                                      heights, probe, caller="monitor-points") for b in betas}
     else:
@@ -150,17 +151,19 @@ def _simulate_nodes(args, settings, betas, heights, scan, probe):
         for path in paths.values():
             check_field_file(path)
         chosen = {}
-        for b in betas:  # each run over the region `lidarjax simulate` reads for it
+        for k, b in enumerate(betas):  # each run over the region `lidarjax simulate` reads
             region = table_region(settings, [b], scan, probe=probe)
             grid = load_field(paths[b], region=region)
-            chosen[b] = probe_for_field(grid, scan, heights, probe, caller="monitor-points")
-    counts = {b: p.n_nodes for b, p in chosen.items()}
+            chosen[b] = probe_for_field(grid, scan, heights, probe, mount=mounts[k],
+                                        caller="monitor-points")
+    counts = {b: tuple(getattr(p, "node_counts", (p.n_nodes,))) for b, p in chosen.items()}
     if len(set(counts.values())) > 1:
-        listed = ", ".join(f"beta {b:g}: {n}" for b, n in counts.items())
+        listed = ", ".join(f"beta {b:g}: {'/'.join(map(str, n))}" for b, n in counts.items())
         raise ValueError(f"the runs' grids give different node counts ({listed}); write the "
                          "monitor points of one beta at a time (--beta)")
     used = chosen[betas[0]]
-    print(f"probe nodes per beam: {used.n_nodes} (chosen for the CFD field's resolution, as "
+    shown = " ".join(str(n) for n in counts[betas[0]])
+    print(f"probe nodes per beam: {shown} (chosen for the CFD field's resolution, as "
           "`lidarjax simulate` chooses them)", file=sys.stderr)
     return used
 

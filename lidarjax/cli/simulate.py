@@ -115,8 +115,9 @@ def run(args) -> int:
         # `simulate_settings` as `exact_at`)
         region = table_region(settings, [b], scan, probe=probe, pitch=args.pitch, roll=args.roll)
         field = load_field(paths[b], region=region, exact_at=exact_at)
-        if getattr(exact_at, "probe", None) is not None:
-            nodes[b] = exact_at.probe.n_nodes
+        used = getattr(exact_at, "probe", None)
+        if used is not None:
+            nodes[b] = getattr(used, "node_counts", (used.n_nodes,))
         fields[b] = getattr(field, "grid", field)  # the grid explains NaNs by its extent
         return field
 
@@ -126,9 +127,12 @@ def run(args) -> int:
                        sources={b: str(p) for b, p in paths.items()},
                        settings_file=args.settings, pitch=args.pitch, roll=args.roll, log=print)
     if nodes and isinstance(probe, PulsedProbe):  # the pulsed rule depends on the count only
-        counts = " ".join(sorted({str(n) for n in nodes.values()}, key=int))
-        print(f"probe nodes per beam: {counts} (chosen for the CFD field's resolution; "
-              f"`lidarjax monitor-points --probe pulsed --probe-nodes N` writes the same nodes)")
+        counts = " ".join(sorted({str(n) for c in nodes.values() for n in c}, key=int))
+        graded = any(len(set(c)) > 1 for c in nodes.values())
+        print(f"probe nodes per beam: {counts} (chosen for the CFD field's resolution"
+              + (" along each height's beams; " if graded else "; ")
+              + "`lidarjax monitor-points --probe pulsed --probe-nodes N` writes the same nodes"
+              + (" for the heights with N)" if graded else ")"))
     why = explain_nans(sims, fields, settings, paths)
     if why:
         print(f"lidarjax simulate: warning: {why}", file=sys.stderr)

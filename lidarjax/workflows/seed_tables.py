@@ -107,7 +107,7 @@ class ExactPoints:
         used = self.probe_given
         if used is not None:
             used = probe_for_field(grid, self.scan, jnp.asarray(self.heights), used,
-                                   caller="exact points")
+                                   mount=self.mount, caller="exact points")
         self.probe = used
         return simulate_points(self.scan, self.mount, self.heights, used)
 
