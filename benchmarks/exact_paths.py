@@ -82,12 +82,14 @@ def sequence_run(seq: Path, n_used: int) -> dict:
     lj, scan, probe, mount, h = _setup()
     from lidarjax.io import load_field_sequence
     from lidarjax.io.openfoam import _read_vector_field, openfoam_times, read_openfoam_mesh
-    from lidarjax.workflows.seed_tables import ExactPoints
-
     names = openfoam_times(seq)[:n_used]
+
+    def exact_points(grid):  # the series' own node choice: one count, no mount
+        return lj.io.simulate_points(scan, mount, h, lj.probe_for_field(grid, scan, h, probe))
+
     mesh = read_openfoam_mesh(seq)
     region = lj.scan_bounds(scan, mount, h, probe=probe)
-    s = load_field_sequence(seq, region=region, exact_at=ExactPoints(scan, mount, h, probe),
+    s = load_field_sequence(seq, region=region, exact_at=exact_points,
                             time_range=(float(names[0]), float(names[-1])), max_snapshots=4,
                             grid_fallback=False)
     first = time.perf_counter()
@@ -104,7 +106,7 @@ def sequence_run(seq: Path, n_used: int) -> dict:
             t1 = time.perf_counter()
             s.snapshot(k)
             later.append(time.perf_counter() - t1)
-    s = load_field_sequence(seq, region=region, exact_at=ExactPoints(scan, mount, h, probe),
+    s = load_field_sequence(seq, region=region, exact_at=exact_points,
                             time_range=(float(names[0]), float(names[-1])), max_snapshots=4,
                             grid_fallback=False)
     span = float(names[-1]) - float(names[0])
