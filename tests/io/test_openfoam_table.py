@@ -17,21 +17,21 @@ import pytest
 import lidarjax as lj
 from lidarjax.cli import main
 from lidarjax.io import load_table, read_openfoam_probes, read_settings
-from lidarjax.workflows.seed_tables import build_table, settings_mounts, table_region
+from lidarjax.workflows.seed_tables import build_table, table_region
 
 from ..helpers import DATA
 
 FOAM = DATA / "openfoam"
 CASE = FOAM / "windAroundBuildings_cut"
 SETTINGS = FOAM / "pulsed" / "roof12.dat"
-NODES = 81  # what `simulate` chooses on the graded grid of the 12 rotations' region
 U_REF = 15.0  # |u_ref| of the seed default (-15, 0, 0): the table is per unit speed
 
 
 @pytest.fixture(scope="module")
 def tables(tmp_path_factory):
     """The table `lidarjax table` builds (each rotation a run: the same case linked 12 times)
-    and the one OpenFOAM's samples of the same nodes imply."""
+    and the one OpenFOAM's samples of the same nodes imply (each rotation its own per-height
+    node counts on the table's grid: `pulsed/roof12_probes.py`, which wrote the probes)."""
     tmp = tmp_path_factory.mktemp("table12")
     s = read_settings(SETTINGS)
     for b in s.betas:
@@ -41,20 +41,34 @@ def tables(tmp_path_factory):
         assert main(["table", str(SETTINGS), "--field", str(tmp / "roof_{beta}"), "--scan",
                      "windcube_v2", "--probe", "pulsed", "--out", str(out)]) == 0
     table = load_table(out)
-    scan, probe = lj.windcube_v2(), lj.PulsedProbe(n_nodes=NODES)
-    mounts = settings_mounts(s, s.betas)
-    h = np.asarray(s.heights())
-    locs = lj.monitor_points(scan, mounts, h, probe)
-    dst = tmp / "pulsed_roof12" / "400"
-    dst.mkdir(parents=True)
-    with gzip.open(CASE / "postProcessing" / "pulsed_roof12" / "400" / "U.gz", "rb") as fi, \
-            open(dst / "U", "wb") as fo:
-        shutil.copyfileobj(fi, fo)
-    values = read_openfoam_probes(tmp / "pulsed_roof12").values_for(locs)
-    sims = lj.simulate_from_monitor_points(locs, values, scan, mounts, h, probe=probe,
-                                           u_ref=(-U_REF, 0.0, 0.0))
-    foam = lj.ResponseTable.from_simulations(sims, mount=mounts, scan=scan, probe=probe)
+    _, mounts, h, probes = _recipe().table_probes()
+    scan = lj.windcube_v2()
+    sims = []
+    for (b, probe), mount in zip(probes.items(), mounts, strict=True):
+        locs = lj.monitor_points(scan, mount, h, probe)
+        name = f"pulsed_roof12_b{b:g}"
+        dst = tmp / name / "400"
+        dst.mkdir(parents=True)
+        with gzip.open(CASE / "postProcessing" / name / "400" / "U.gz", "rb") as fi, \
+                open(dst / "U", "wb") as fo:
+            shutil.copyfileobj(fi, fo)
+        values = read_openfoam_probes(tmp / name).values_for(locs)
+        sims += lj.simulate_from_monitor_points(locs, values, scan, [mount], h, probe=probe,
+                                                u_ref=(-U_REF, 0.0, 0.0))
+    foam = lj.ResponseTable.from_simulations(sims, mount=mounts, scan=scan,
+                                             probe=lj.PulsedProbe())
     return s, table, foam
+
+
+def _recipe():
+    """The committed recipe script (its node choice is what the test checks against)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("roof12_probes",
+                                                  FOAM / "pulsed" / "roof12_probes.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def test_table_over_12_rotations_equals_openfoam_probes(tables):
