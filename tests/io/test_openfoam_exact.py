@@ -140,27 +140,32 @@ def test_native_path_equals_openfoam_sampling_on_the_hill(dtype, tmp_path):
 
 
 def test_monitor_points_given_the_field_write_the_nodes_simulate_uses(roof, tmp_path):
-    """`lidarjax monitor-points --field CASE` chooses the nodes as `simulate` does (77 on the
-    roof: nothing copied by hand), its read-back equals the native path, and `--sampled`
-    without the field refuses the 77-node samples in one line that names the count."""
-    settings, case, native, _ = roof
+    """`lidarjax monitor-points --field CASE` chooses the nodes as `lidarjax simulate --field
+    CASE` does (per height from the spacing along the beams: both print the same counts, and
+    the points written are simulate's prepared points, named), nothing copied by hand; and
+    `--sampled` without the field refuses the 77-node samples in one line naming the count."""
+    settings, case, _, _ = roof
     common = ["--scan", "windcube_v2", "--probe", "pulsed"]
-    err = io.StringIO()
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         assert main(["monitor-points", str(settings), *common, "--field", str(case),
                      "--out", str(tmp_path / "w")]) == 0
-        assert main(["monitor-points", str(settings), *common, "--probe-nodes", "77",
-                     "--out", str(tmp_path / "n")]) == 0
-    assert "probe nodes per beam: 77" in err.getvalue()
-    a = (tmp_path / "w" / "lidarProbes.csv").read_text().splitlines()
-    b = (tmp_path / "n" / "lidarProbes.csv").read_text().splitlines()
-    assert [r for r in a if not r.startswith("#")] == [r for r in b if not r.startswith("#")]
+        assert main(["simulate", str(settings), "--field", str(case), *common,
+                     "--out", str(tmp_path / "sim")]) == 0
+    wrote = next(line for line in err.getvalue().splitlines() if "probe nodes per beam" in line)
+    said = next(line for line in out.getvalue().splitlines() if "probe nodes per beam" in line)
+    counts = wrote.split(":")[1].split("(")[0].split()
+    assert set(counts) == set(said.split(":")[1].split("(")[0].split()), (wrote, said)
+    s = read_settings(settings)
+    scan, mount, h = lj.windcube_v2(), lj.Mount(s.location(0.0)), np.asarray(s.heights())
+    grid = lj.io.load_field(case, region=lj.scan_bounds(scan, mount, h, probe=lj.PulsedProbe()))
+    used = lj.probe_for_field(grid, scan, h, lj.PulsedProbe(), mount=mount)
+    expected = lj.monitor_points(scan, mount, h, used).points
+    rows = [r.split(",") for r in (tmp_path / "w" / "lidarProbes.csv").read_text().splitlines()
+            if r and not r.startswith("#") and not r.startswith("name")]
+    got = np.array([[float(v) for v in r[2:5]] for r in rows])
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
     sampled = _unzipped(tmp_path, case, "400", "pulsed_roof")
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        assert main(["monitor-points", str(settings), *common, "--field", str(case),
-                     "--sampled", str(sampled), "--out", str(tmp_path / "r")]) == 0
-    got = read_table_csv(tmp_path / "r" / "simulation_0.csv").columns
-    _check_equal(native, got, "monitor-points --field")
     err = io.StringIO()
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
         assert main(["monitor-points", str(settings), *common, "--sampled", str(sampled),
