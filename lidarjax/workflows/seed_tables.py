@@ -20,7 +20,7 @@ from .._backend import default_batch, positive_size
 from .._util import import_optional
 from ..angles import horizontal_speed, seed_azimuth
 from ..batch import simulate_rotations, stack_fields
-from ..field import GridField
+from ..field import GridField, IndexedPoints
 from ..footprint import scan_bounds
 from ..forward import Simulation, probe_for_field, simulate
 from ..io import simulate_points
@@ -179,7 +179,11 @@ def simulate_settings(
     for i in range(0, n, size):  # the last batch padded with its last run: one compilation
         idx = np.minimum(np.arange(i, i + size), n - 1)
         try:
-            stacked = stack_fields([fields[k] for k in idx]) if size > 1 else None
+            # a mesh made exact at each rotation's own points is simulated per rotation: a
+            # batch chooses one node count per height for all its mounts, which need not be
+            # each rotation's own (the points prepared)
+            exact = any(isinstance(fields[k], IndexedPoints) for k in idx)
+            stacked = stack_fields([fields[k] for k in idx]) if size > 1 and not exact else None
         except ValueError:  # runs on different grids: one call (and compilation) per grid
             stacked = None
         if stacked is None:
