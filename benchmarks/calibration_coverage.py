@@ -21,12 +21,13 @@ roll; epsilon is not identifiable).
 ``--label`` names the model the run measured (``before``: main's `calibrate`, which
 neglects the displacement of the measurement points; ``after``: with it); results of other
 labels already in the JSON are kept, so the markdown table shows both. The same seed gives
-the same campaigns. ``--gradient`` builds the tables with the flow's gradient at the beam
-points (issue 29's `beam_gradient`, when the installed lidarjax has it).
+the same campaigns. The tables carry the flow's gradient along the beams (issue 29's
+`beam_gradient`) when this checkout's `ResponseTable.from_simulations` takes it from the
+fields; the JSON says whether they did.
 
 Writes benchmarks/results/calibration_coverage.{json,md,png}. Run from a checkout:
 ``python3 benchmarks/calibration_coverage.py --label before [--campaigns 200] [--records 400]
-[--settings power_law,hill_crest] [--gradient]``.
+[--settings power_law,hill_crest]``.
 """
 
 from __future__ import annotations
@@ -62,14 +63,16 @@ def _commit() -> str:
         return "unknown"
 
 
-def run_setting(name: str, n_campaigns: int, n_records: int, seed: int, gradient: bool,
+def run_setting(name: str, n_campaigns: int, n_records: int, seed: int,
                 chunk: int = 50) -> dict:
     t0 = time.perf_counter()
     s = cs.setting(name)
-    table = cs.table(s, **({"gradient": True} if gradient else {}))
+    table = cs.table(s)
+    gradient = getattr(table, "beam_gradient", None) is not None
     t_table = time.perf_counter() - t0
     rng = np.random.default_rng([seed, SETTINGS.index(name)])
-    out = {"heights_m": s.heights.tolist(), "location_m": s.location.tolist()}
+    out = {"heights_m": s.heights.tolist(), "location_m": s.location.tolist(),
+           "gradient": gradient}
     parts = {True: [], False: []}
     t_sim = t_cal = 0.0
     for start in range(0, n_campaigns, chunk):
@@ -179,8 +182,6 @@ def main(argv=None) -> None:
     p.add_argument("--settings", default=",".join(SETTINGS))
     p.add_argument("--label", default="before")
     p.add_argument("--model", default=None, help="words naming the calibrate model measured")
-    p.add_argument("--gradient", action="store_true",
-                   help="tables with the flow's gradient at the beam points")
     p.add_argument("--seed", type=int, default=29)
     p.add_argument("--out", default=str(RESULTS / "calibration_coverage.json"))
     a = p.parse_args(argv)
@@ -192,7 +193,7 @@ def main(argv=None) -> None:
     data = json.loads(out.read_text()) if out.exists() else {"runs": {}}
     run = {"model": a.model or ("main's calibrate: neglects the displacement of the "
                                 "measurement points" if a.label == "before" else a.label),
-           "commit": _commit(), "gradient": a.gradient, "campaigns": a.campaigns,
+           "commit": _commit(), "campaigns": a.campaigns,
            "records": a.records, "seed": a.seed, "machine": machine(), "settings": {}}
     old = data["runs"].get(a.label, {}).get("settings", {})
     for name in SETTINGS:  # keep this label's other settings from an earlier partial run
@@ -200,8 +201,9 @@ def main(argv=None) -> None:
             run["settings"][name] = old[name]
     for name in names:
         t = time.perf_counter()
-        res = run_setting(name, a.campaigns, a.records, a.seed, a.gradient)
+        res = run_setting(name, a.campaigns, a.records, a.seed)
         run["settings"][name] = res
+        run["gradient"] = bool(res["gradient"])
         cov = {k: dict(zip(res[k]["names"], np.round(res[k]["coverage"], 3).tolist(),
                            strict=True)) for k in ("reference", "no_reference")}
         print(f"{name}: {time.perf_counter() - t:.1f} s, coverage {cov}", flush=True)
