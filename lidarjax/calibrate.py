@@ -68,7 +68,12 @@ theorem), so a year of records costs a few passes over the data.
   true mean ``w`` of the table does not. It needs records from several directions.
   **Epsilon is not identifiable without a reference**: turning every direction by the same
   angle fits the records almost as well. `calibrate` then returns NaN for it,
-  ``identifiable = False`` and says so in `notes`.
+  ``identifiable = False`` and says so in `notes`. Where the flow varies in space an unknown
+  turn still moves the measurement points; with ``north_offset="instrument"`` and a table
+  with `beam_gradient` that displacement is fitted as a nuisance (the turn itself is taken
+  up by the records' directions; a ridge of `RIDGE` holds it where the records cannot tell
+  it), so that it does not go into the tilt, whose standard errors are then marginal
+  over it.
 
 **Uncertainty.** ``cov = H^-1 B H^-1`` (the sandwich, `covariance="robust"`, default) with
 ``H`` the reduced Gauss--Newton matrix and ``B`` the sum over records of the outer products
@@ -116,10 +121,19 @@ TOLERANCE = 1e-7
 #: along it exceeds this fraction of the largest (offsets correlated beyond 0.9999 are not).
 IDENTIFIABILITY_RCOND = 1e-4
 
+#: The ridge that holds a nuisance offset (epsilon without a reference) where the records
+#: cannot tell it, relative to the largest diagonal entry of the reduced matrix.
+RIDGE = 1e-6
+
 _NOT_IDENTIFIABLE_EPSILON = (
     "epsilon (north offset) is not identifiable without a reference: rotating every "
     "direction by one angle fits the records equally well; give reference=(speed, direction) "
     "from a mast, another lidar or a model")
+
+_EPSILON_AS_NUISANCE = (
+    "without a reference the north offset is kept as a nuisance: the displacement of the "
+    "measurement points by an unknown turn is fitted (the turn itself is taken up by the "
+    "records' directions), and the tilt's standard errors are marginal over it")
 
 _NO_GRADIENT = (
     "the table has no beam_gradient: how the offsets move the measurement points is left "
@@ -345,13 +359,16 @@ def _start(model: _CalibrationModel, problems: _Problems, with_ref: bool):
 
 
 @eqx.filter_jit
-def _solve(model: _CalibrationModel, problems: _Problems, free, max_passes, n_records,
+def _solve(model: _CalibrationModel, problems: _Problems, free, weak, max_passes, n_records,
            with_ref):
     """Schur-complement Gauss--Newton over the offsets (mask `free` of 3) and every
-    problem's nuisances, `S` relinearised at every pass; see the module docstring."""
+    problem's nuisances, `S` relinearised at every pass; see the module docstring. The
+    offsets in `weak` (a subset of `free`) are held near 0 by a ridge of `RIDGE` times the
+    largest diagonal of the reduced matrix where the records cannot tell them."""
     dtype = problems.los.dtype
     w = problems.weights
     freef = free.astype(dtype)
+    weakf = weak.astype(dtype)
 
     def pieces(nuisance, theta):
         sens = model.sensitivity(theta)
@@ -388,7 +405,10 @@ def _solve(model: _CalibrationModel, problems: _Problems, free, max_passes, n_re
             wrss=jnp.sum(w * resid * resid * ok[:, None]),
             n_obs=jnp.sum((w > 0) & ok[:, None]), n_ok=jnp.sum(ok),
             n_used=jnp.sum(jnp.any(w > 0, -1) & ok), num_steps=it, last_step=zero)
-        hm = hmat * freef[:, None] * freef[None, :] + eye * (1.0 - freef)[:, None]
+        ridge = weakf * (RIDGE * jnp.max(jnp.diagonal(hmat) * freef))
+        hm = (hmat * freef[:, None] * freef[None, :] + eye * (1.0 - freef)[:, None]
+              + jnp.diag(ridge))
+        g = g - ridge * theta
         # a trust region: at most 5 degrees of north offset and 1 degree of tilt per pass
         dtheta = jnp.clip(jnp.linalg.solve(hm, g * freef), -limit, limit)
         dnuis = jnp.einsum("nij,nj->ni", ainv, gn - jnp.einsum("nij,j->ni", c, dtheta))
@@ -551,36 +571,46 @@ def _model_of(table: ResponseTable, dtype, north_offset: str = "instrument"
     return model, notes
 
 
-def _covariance(sol: _Solution, free, with_ref, n_rec, covariance):
-    """``(identifiable (3,), cov (3, 3), sigma2)`` on the host from the solution."""
+def _covariance(sol: _Solution, free, weak, with_ref, n_rec, covariance):
+    """``(identifiable (3,), cov (3, 3), sigma2)`` on the host from the solution: for the
+    offsets in `free` but not `weak`, marginal over the `weak` ones (their ridge kept)."""
     hmat, meat = (np.asarray(x, np.float64) for x in (sol.hessian, sol.meat))
     m = 1 if with_ref else 2
     dof = max(int(sol.n_obs) - m * int(sol.n_ok) - int(free.sum()), 1)
     sigma2 = float(sol.wrss) / dof
-    # identifiability: eigenvalues of the normalised reduced matrix over the free offsets
-    idx = np.flatnonzero(free)
     ident = np.zeros(3, bool)
     cov = np.full((3, 3), np.nan)
-    if not idx.size:
+    shown = np.flatnonzero(free & ~weak)
+    held = np.flatnonzero(weak)
+    if not shown.size:
         return ident, cov, sigma2
-    hs = hmat[np.ix_(idx, idx)]
+    hreg = hmat + np.diag(weak * RIDGE * np.max(np.diag(hmat) * free, initial=0.0))
+    # identifiability: eigenvalues of the normalised reduced matrix of the shown offsets,
+    # the held ones eliminated
+    hs = hreg[np.ix_(shown, shown)]
+    if held.size:
+        hw = hreg[np.ix_(held, held)]
+        if np.all(np.diag(hw) > 0):
+            cross = hreg[np.ix_(shown, held)]
+            hs = hs - cross @ np.linalg.solve(hw, cross.T)
     d = np.sqrt(np.maximum(np.diag(hs), 0.0))
-    ok_d = d > 0
-    if not ok_d.all():
+    if not np.all(d > 0):
         return ident, cov, sigma2
     eig, vec = np.linalg.eigh(hs / np.outer(d, d))
-    weak = eig < IDENTIFIABILITY_RCOND * max(eig[-1], 1e-300)
-    ident[idx] = True
-    for j in np.flatnonzero(weak):  # offsets along a null direction are not identified
-        ident[idx[np.abs(vec[:, j]) > 0.3]] = False
-    if ident[idx].any():
-        sub = idx[ident[idx]]
-        hinv = np.linalg.inv(hmat[np.ix_(sub, sub)])
+    weak_dirs = eig < IDENTIFIABILITY_RCOND * max(eig[-1], 1e-300)
+    ident[shown] = True
+    for j in np.flatnonzero(weak_dirs):  # offsets along a null direction are not identified
+        ident[shown[np.abs(vec[:, j]) > 0.3]] = False
+    if ident[shown].any():
+        sub = np.concatenate([shown[ident[shown]], held])
+        k = int(ident[shown].sum())
+        hinv = np.linalg.inv(hreg[np.ix_(sub, sub)])
         if covariance == "robust":
-            cov[np.ix_(sub, sub)] = hinv @ meat[np.ix_(sub, sub)] @ hinv * (
-                n_rec / max(n_rec - sub.size, 1))
+            c = hinv @ meat[np.ix_(sub, sub)] @ hinv * (n_rec / max(n_rec - sub.size, 1))
         else:
-            cov[np.ix_(sub, sub)] = sigma2 * hinv
+            c = sigma2 * hinv
+        keep = sub[:k]
+        cov[np.ix_(keep, keep)] = c[:k, :k]
     return ident, cov, sigma2
 
 
@@ -678,14 +708,23 @@ def calibrate(
     if model.gradient is None:
         warnings.warn(f"calibrate: {notes[0]}", stacklevel=2)
     free = np.array([x in names for x in CALIBRATION_PARAMETERS])
+    weak = np.zeros(3, bool)
     if not with_ref and free[0]:
-        free[0] = False
         notes.append(_NOT_IDENTIFIABLE_EPSILON)
+        if model.turn_beams and model.gradient is not None:
+            # the turn itself is taken up by the records' directions, but where the flow
+            # varies in space it also moves the measurement points: that part is fitted (a
+            # nuisance, held by a ridge where the records cannot tell it), so that it does
+            # not go into the tilt
+            weak[0] = True
+            notes.append(_EPSILON_AS_NUISANCE)
+        else:
+            free[0] = False
     n_records = los.shape[0]
-    sol = _solve(model, problems, jnp.asarray(free), int(iterations), int(n_records),
-                 bool(with_ref))
+    sol = _solve(model, problems, jnp.asarray(free), jnp.asarray(weak), int(iterations),
+                 int(n_records), bool(with_ref))
     used = np.asarray(problems.weights).sum(-1) > 0
     n_rec = int(np.unique(np.asarray(problems.record)[used]).size)
-    ident, cov, sigma2 = _covariance(sol, free, with_ref, n_rec, covariance)
-    return _result(names, sol, free, ident, cov, sigma2, model.nominal, header, n_rec,
-                   notes, dtype)
+    ident, cov, sigma2 = _covariance(sol, free, weak, with_ref, n_rec, covariance)
+    return _result(names, sol, free & ~weak, ident, cov, sigma2, model.nominal, header,
+                   n_rec, notes, dtype)
