@@ -132,6 +132,13 @@ def markdown(data: dict) -> str:
                     cells += [f"{mark}{cov:.3f}{mark}", f"{mmark}{mz:+.2f}{mmark}",
                               f"{sm['sd_z'][j]:.2f}", f"{sm['mean_z_signed'][j]:+.2f}"]
                 lines.append(f"| {name} | {off} ({tag}) | " + " | ".join(cells) + " |")
+    lines += ["", "Campaigns whose calibration reports `converged` (with / without a "
+              "reference):", ""]
+    for lab in labels:
+        st = data["runs"][lab]["settings"]
+        lines.append(f"- {lab}: " + ", ".join(
+            f"{n} {st[n]['reference']['converged']:.3f} / {st[n]['no_reference']['converged']:.3f}"
+            for n in st))
     lines += ["", "Bold: outside the target. Largest |estimate - truth| and the median "
               "standard error (deg), last run:", ""]
     last = data["runs"][labels[-1]]
@@ -184,7 +191,15 @@ def main(argv=None) -> None:
     p.add_argument("--model", default=None, help="words naming the calibrate model measured")
     p.add_argument("--seed", type=int, default=29)
     p.add_argument("--out", default=str(RESULTS / "calibration_coverage.json"))
+    p.add_argument("--report", action="store_true",
+                   help="only rewrite the markdown and png from the JSON")
     a = p.parse_args(argv)
+    if a.report:
+        data = json.loads(Path(a.out).read_text())
+        Path(a.out).with_suffix(".md").write_text(markdown(data))
+        plot(data, Path(a.out).with_suffix(".png"))
+        print(markdown(data))
+        return
     names = [x for x in a.settings.split(",") if x]
     bad = [x for x in names if x not in SETTINGS]
     if bad:

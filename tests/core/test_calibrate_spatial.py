@@ -8,7 +8,8 @@ none of calibrate's model (its first-order tilt term, the direction shift, gradi
 - On the crest of a ridge the tilt moves the beam points across the flow's gradient: a model
   that neglects that displacement (main's before issue 29) biases pitch and roll by a few
   per cent of the offset, several standard errors (mean ``z * sign(truth)`` about -2 for
-  roll here). That test needs the displacement model of issue 29 point 1.
+  roll here). That test needs the displacement model of issue 29 point 1 (the table's
+  `beam_gradient`).
 
 The full validation (200 campaigns per setting, five sites) is
 benchmarks/calibration_coverage.py.
@@ -51,18 +52,22 @@ def crest():
     return s, cs.table(s), camp
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="needs calibrate's displacement model (issue 29 point 1): main's calibrate "
-           "neglects how the tilt moves the measurement points; on the ridge crest its roll "
-           "has mean z * sign(truth) about -2",
-)
+@pytest.fixture(scope="module")
+def crest_estimates(crest):
+    """calibrate on every crest campaign, with and without the reference (computed once)."""
+    _, table, camp = crest
+    return {ref: cs.estimate(table, camp, reference=ref) for ref in (True, False)}
+
+
 @pytest.mark.parametrize("reference", [True, False])
-def test_offsets_unbiased_on_a_ridge_crest(crest, reference):
-    s, table, camp = crest
-    res = cs.estimate(table, camp, reference=reference)
-    assert res["converged"].all()
+def test_offsets_unbiased_on_a_ridge_crest(crest, crest_estimates, reference):
+    # Needs calibrate's displacement model (issue 29 point 1: the table's beam_gradient):
+    # main's calibrate before it, which neglected how the tilt moves the measurement points,
+    # fails here (roll: mean z * sign(truth) -2.2, sd of z 2.5; bounds 0.75 and 1.55)
+    assert crest[1].beam_gradient is not None
+    res = crest_estimates[reference]
     z, truth = res["z"], res["truth"]
+    assert np.isfinite(z).all()
     # With a model right to first order, z ~ N(0, 1) per campaign independently of the
     # offset's sign: the mean of z * sign(truth) over 16 campaigns has sd 0.25, so |.| < 0.75
     # is a 3-sigma bound (a bias proportional to the offset shows here, and cancels in the
@@ -74,6 +79,19 @@ def test_offsets_unbiased_on_a_ridge_crest(crest, reference):
     # the standard errors say how large the errors are: sd of z within 3 sigma of 1 (the
     # sample sd of 16 normal values has sd ~ 1/sqrt(2 * 15) = 0.18)
     assert np.all(np.std(z, 0, ddof=1) < 1.0 + 3.0 / np.sqrt(2 * (N_CAMPAIGNS - 1)))
+
+
+@pytest.mark.parametrize("reference", [
+    True,
+    pytest.param(False, marks=pytest.mark.xfail(
+        strict=True,
+        reason="issue 29 (f20b8f2): without a reference calibrate keeps the north offset as a "
+               "nuisance and stops after 12 passes with the offsets still moving by 1e-7 deg "
+               "in 3 of these 16 campaigns (81 % of power-law campaigns in "
+               "benchmarks/calibration_coverage.py): estimates fine, `converged` False")),
+])
+def test_calibration_converges_on_a_ridge_crest(crest_estimates, reference):
+    assert crest_estimates[reference]["converged"].all()
 
 
 def test_crest_campaign_is_what_simulate_gives(crest):
