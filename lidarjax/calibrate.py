@@ -272,12 +272,14 @@ def _model_and_jacobian(model: _CalibrationModel, nuisance, theta, sens, ref_dir
     # the direction the table sees: shifted by the north offset when the flow turns with
     # the instrument (north_offset="site")
     dl = d if model.turn_beams else d - theta[0]
-    resp, resp_slope = spline_at(model.geom, model.response, dl, (hidx,), slope=True)  # (n, b)
-    s, s_slope = spline_at(model.geom, sens, dl, (hidx,), slope=True)  # (n, b, 3)
-    f = resp + jnp.sum(dn * s, -1)  # (n, b) per unit speed
-    df = resp_slope + jnp.sum(dn * s_slope, -1)  # per degree of direction
+    # the beams' changes are the same for every problem: contracted with S on the table's
+    # coefficients (the splines are linear in them), so each problem evaluates one spline
+    # with its slope, ``R + dn . S``, and one without, ``(d dn / d theta) . S``
+    f_c = model.response + jnp.einsum("cshbk,bk->cshb", sens, dn, precision=HIGHEST)
+    p_c = jnp.einsum("cshbk,bkt->cshbt", sens, ddn, precision=HIGHEST)
+    f, df = spline_at(model.geom, f_c, dl, (hidx,), slope=True)  # (n, b) per unit speed
     los = speed[:, None] * f
-    j_theta = speed[:, None, None] * jnp.einsum("bkt,nbk->nbt", ddn, s, precision=HIGHEST)
+    j_theta = speed[:, None, None] * spline_at(model.geom, p_c, dl, (hidx,))  # (n, b, 3)
     if not model.turn_beams:
         j_theta = jnp.concatenate([-speed[:, None, None] * df[..., None], j_theta[..., 1:]],
                                   -1)
