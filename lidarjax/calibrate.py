@@ -339,6 +339,7 @@ class _Solution(eqx.Module):
     n_obs: Int[Array, ""]
     n_ok: Int[Array, ""]
     n_used: Int[Array, ""]
+    n_records: Int[Array, ""]
     num_steps: Int[Array, ""]
     last_step: Float[Array, ""]
 
@@ -406,7 +407,10 @@ def _solve(model: _CalibrationModel, problems: _Problems, free, weak, max_passes
             meat=jnp.einsum("ri,rj->ij", s_rec, s_rec, precision=HIGHEST),
             wrss=jnp.sum(w * resid * resid * ok[:, None]),
             n_obs=jnp.sum((w > 0) & ok[:, None]), n_ok=jnp.sum(ok),
-            n_used=jnp.sum(jnp.any(w > 0, -1) & ok), num_steps=it, last_step=zero)
+            n_used=jnp.sum(jnp.any(w > 0, -1) & ok),
+            n_records=jnp.sum(jax.ops.segment_max(jnp.any(w > 0, -1), problems.record,
+                                                  num_segments=n_records)),
+            num_steps=it, last_step=zero)
         ridge = weakf * (RIDGE * jnp.max(jnp.diagonal(hmat) * freef))
         hm = (hmat * freef[:, None] * freef[None, :] + eye * (1.0 - freef)[:, None]
               + jnp.diag(ridge))
@@ -498,27 +502,37 @@ def _checked(records, table, wrt, reference, covariance, north_offset):
 def _flattened(los, table, weights, ref_speed, ref_dir, min_beams, with_ref, dtype):
     """Records ``(r, h, b)`` to record-height `_Problems` ``(r * h, ...)``, record-major,
     keeping the record-heights with at least `min_beams` usable beams (and a reference)."""
-    if weights is None:
-        w = jnp.ones(los.shape, dtype)
-    else:
+    if weights is not None:
         w = jnp.broadcast_to(jnp.asarray(weights, dtype), los.shape)
         if is_concrete(w) and (np.any(np.asarray(w) < 0) or np.any(np.isinf(np.asarray(w)))):
             raise ValueError("calibrate: `weights` must be finite and nonnegative.")
-        w = jnp.where(jnp.isnan(w), 0.0, w)
-    usable = jnp.isfinite(los) & (w > 0) & table.valid
-    enough = jnp.sum(usable, -1) >= int(min_beams)  # (r, h)
+    else:
+        w = None
+    as_array = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
+    return _flatten(los.astype(dtype), w, table.valid, as_array(ref_speed), as_array(ref_dir),
+                    int(min_beams), bool(with_ref))
+
+
+@eqx.filter_jit
+def _flatten(los, w, valid, ref_speed, ref_dir, min_beams, with_ref):
+    """`_flattened`'s array work, one compiled program (not a dozen eager operations over
+    the year's records)."""
+    dtype = los.dtype
+    w = jnp.ones(los.shape, dtype) if w is None else jnp.where(jnp.isnan(w), 0.0, w)
+    usable = jnp.isfinite(los) & (w > 0) & valid
+    enough = jnp.sum(usable, -1) >= min_beams  # (r, h)
     if with_ref:
-        enough = enough & jnp.isfinite(jnp.asarray(ref_dir))
+        enough = enough & jnp.isfinite(ref_dir)
         if ref_speed is not None:
-            enough = enough & jnp.isfinite(jnp.asarray(ref_speed))
+            enough = enough & jnp.isfinite(ref_speed)
     w = jnp.where(usable & enough[..., None], w, 0.0).astype(dtype)
-    los = jnp.where(w > 0, los, 0.0).astype(dtype)
+    los = jnp.where(w > 0, los, 0.0)
     r, h = los.shape[:2]
     flat = lambda x: x.reshape((r * h,) + x.shape[2:])  # noqa: E731
     return _Problems(
         los=flat(los), weights=flat(w),
         ref_dir=jnp.zeros((r * h,), dtype) if ref_dir is None else flat(
-            jnp.asarray(np.nan_to_num(ref_dir), dtype)),
+            jnp.where(jnp.isfinite(ref_dir), ref_dir, 0.0)),
         height=flat(jnp.broadcast_to(jnp.arange(h, dtype=jnp.int32), (r, h))),
         record=flat(jnp.broadcast_to(jnp.arange(r, dtype=jnp.int32)[:, None], (r, h))))
 
@@ -725,8 +739,7 @@ def calibrate(
     n_records = los.shape[0]
     sol = _solve(model, problems, jnp.asarray(free), jnp.asarray(weak), int(iterations),
                  int(n_records), bool(with_ref))
-    used = np.asarray(problems.weights).sum(-1) > 0
-    n_rec = int(np.unique(np.asarray(problems.record)[used]).size)
+    n_rec = int(sol.n_records)
     ident, cov, sigma2 = _covariance(sol, free, weak, with_ref, n_rec, covariance)
     return _result(names, sol, free & ~weak, ident, cov, sigma2, model.nominal, header,
                    n_rec, notes, dtype)
