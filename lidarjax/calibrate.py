@@ -737,7 +737,8 @@ def calibrate(
         else:
             free[0] = False
     n_records = los.shape[0]
-    sol = _solve(model, problems, jnp.asarray(free), jnp.asarray(weak), int(iterations),
+    sol = _solve(model, problems, jnp.asarray(free), jnp.asarray(weak),
+                 jnp.asarray(int(iterations), jnp.int32),
                  int(n_records), bool(with_ref))
     n_rec = int(sol.n_records)
     ident, cov, sigma2 = _covariance(sol, free, weak, with_ref, n_rec, covariance)
