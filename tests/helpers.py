@@ -60,6 +60,81 @@ def scanning_file(name: str) -> Path:
     pytest.skip(f"real scanning-lidar file not available ({name}: tests/data/scanning/README.md)")
 
 
+#: The 2-ray Soverato VAD as the source repository holds it (its header says 6 rays per scan).
+VAD_SOURCE = "VAD_194_20210624_170110.hpl"
+
+
+def vad_cut(folder: Path, n_gates: int = 40) -> Path:
+    """The committed recipe of the VAD cut (tests/data/scanning/README.md), run on the
+    unedited source: every line kept byte for byte (CRLF, trailing spaces) except the
+    gate lines past `n_gates` of each ray, dropped, and the header's ``Number of gates``,
+    set to `n_gates`; ``No. of rays in file`` stays 6 (rays per scan; the file holds 2).
+    Written into `folder` as ``VAD_194_20210624_170110_cut.hpl``."""
+    source = scanning_file(VAD_SOURCE).read_bytes()
+    lines = source.split(b"\r\n")
+    end = next(i for i, line in enumerate(lines) if line.startswith(b"****"))
+    head = [line.replace(b"Number of gates:\t400", b"Number of gates:\t%d" % n_gates)
+            for line in lines[:end + 1]]
+    body, k = [], end + 1
+    while k < len(lines) and lines[k].strip():
+        body += lines[k:k + 1 + n_gates]  # the ray line and its first gates
+        k += 1 + 400
+    out = folder / "VAD_194_20210624_170110_cut.hpl"
+    out.write_bytes(b"\r\n".join(head + body + lines[k:]))
+    return out
+
+
+def _e_halo(x: float) -> str:
+    """``x`` as the StreamLine writes beta: ``1.569249E-6`` (no zero-padded exponent)."""
+    mantissa, exponent = f"{x:.6E}".split("E")
+    return f"{mantissa}E{int(exponent)}"
+
+
+def write_hpl(path: Path, *, hours, azimuth, elevation, doppler, intensity=None, beta=None,
+              gate_length: float = 30.0, rays_per_scan: int = 1, scan_type: str = "Stare",
+              start: str | None = None, system_id: str = "99", pitch_roll: bool = True,
+              spectral_width=None, newline: str = "\r\n") -> Path:
+    """Write a synthetic Halo ``.hpl`` in the real layout (header lines, fixed formats and
+    CRLF line ends of the StreamLine files in ../shared/data/scanning): per ray the decimal
+    hours `hours` ``(r,)`` (written modulo 24, as the instrument does), `azimuth`,
+    `elevation` ``(r,)`` degrees, `doppler` ``(r, g)`` m/s, `intensity` (default 1.1) and
+    `beta` (default 1e-6) ``(r, g)``; ``pitch roll`` 0.1 and -0.2 unless `pitch_roll` is
+    False (the older three-number ray lines); a spectral-width column when given. The
+    header's start time defaults to the first ray's time (start date 2024-03-01)."""
+    hours = np.asarray(hours, float)
+    doppler = np.asarray(doppler, float)
+    r, g = doppler.shape
+    intensity = np.full((r, g), 1.1) if intensity is None else np.asarray(intensity, float)
+    beta = np.full((r, g), 1e-6) if beta is None else np.asarray(beta, float)
+    if start is None:
+        h = hours[0]
+        start = f"20240301 {int(h):02d}:{int(h * 60) % 60:02d}:{(h * 3600) % 60:05.2f}"
+    width = spectral_width is not None
+    header = [
+        f"Filename:\t{path.name}", f"System ID:\t{system_id}", f"Number of gates:\t{g}",
+        f"Range gate length (m):\t{gate_length:.1f}", "Gate length (pts):\t10", "Pulses/ray:\t15000",
+        f"No. of rays in file:\t{rays_per_scan}", f"Scan type:\t{scan_type}", "Focus range:\t65535",
+        f"Start time:\t{start}", "Resolution (m/s):\t0.0382",
+        "Range of measurement (center of gate) = (range gate + 0.5) * Gate length",
+        "Data line 1: Decimal time (hours)  Azimuth (degrees)  Elevation (degrees)"
+        + (" Pitch (degrees) Roll (degrees)" if pitch_roll else ""),
+        "f9.6,1x,f6.2,1x,f6.2",
+        "Data line 2: Range Gate  Doppler (m/s)  Intensity (SNR + 1)  Beta (m-1 sr-1)"
+        + (" Spectral Width" if width else ""),
+        "i3,1x,f6.4,1x,f8.6,1x,e12.6" + (",1x,f6.4" if width else "") + " - repeat for no. gates",
+        "****" + (" Instrument spectral width = 5.656623" if width else ""),
+    ]
+    body = []
+    for k in range(r):
+        line = f"{hours[k] % 24:.8f} {azimuth[k]:6.2f} {elevation[k]:6.2f}"
+        body.append(line + (" 0.10 -0.20" if pitch_roll else ""))
+        for j in range(g):
+            row = f"{j:3d} {doppler[k, j]:.4f} {intensity[k, j]:.6f} {_e_halo(beta[k, j]):>12}"
+            body.append(row + (f" {spectral_width[k, j]:.4f}" if width else ""))
+    path.write_text(newline.join(header + body) + newline, newline="")
+    return path
+
+
 def tree_allclose(a, b, rtol=RTOL64, atol=ATOL64) -> bool:
     """True when two pytrees have the same structure and all leaves are close (NaN == NaN)."""
     la, ta = jax.tree_util.tree_flatten(a)

@@ -16,13 +16,16 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+import warnings
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 
-from .._util import atomic_path
+from .._util import atomic_path, import_optional
 from ..io import read_hpl, read_windcube_scan
+from ..io.hpl import INTENSITY_THRESHOLD, HaloScan
 from ..probe import CWProbe, PointProbe
 from ..scanning import (
     INSTRUMENTS,
@@ -107,10 +110,12 @@ def add_scan_pattern_arguments(parser, *, sector=("--sector-start", "--sector-st
                    help="pulsed probe per gate: gate length and pulse (default halo_streamline)")
 
 
-def read_scan_source(args):
+def read_scan_source(args, *, with_file: bool = False):
     """``(pattern, gate_length)``: the `ScanPattern` of ``args.scan`` (a preset with the
     pattern options, or a scan file's layout) and the gate length in m the probe uses
-    (``--gate-length``, else the file's, else the instrument's)."""
+    (``--gate-length``, else the file's, else the instrument's). `with_file`: also the scan
+    file read (`lidarjax.io.HaloScan` or `lidarjax.io.WindcubeScan`; None for a preset), as
+    a third item."""
     name = str(args.scan).lower()
     instrument = args.instrument or _DEFAULT_INSTRUMENT
     if name not in PRESETS:
@@ -126,9 +131,13 @@ def read_scan_source(args):
         if given:
             raise ValueError(f"{given[0]} sets a preset's rays or gates, but the scan file {path} "
                              "has its own; drop it (or give a preset instead of the file)")
-        scan = read_hpl(path) if suffix == ".hpl" else read_windcube_scan(path)
+        with warnings.catch_warnings(record=True) as caught:  # one line each on stderr
+            warnings.simplefilter("always")
+            scan = read_hpl(path) if suffix == ".hpl" else read_windcube_scan(path)
+        for w in caught:
+            print(f"warning: {w.message}", file=sys.stderr)
         gate = args.gate_length if args.gate_length is not None else float(scan.gate_length)
-        return scan.pattern(), gate
+        return (scan.pattern(), gate, scan) if with_file else (scan.pattern(), gate)
     gate = args.gate_length or INSTRUMENTS[instrument]["gate_length"]
     ranges = gate_ranges(100 if args.gates is None else args.gates, gate)
     n_sub = 1 if args.n_sub is None else args.n_sub
@@ -150,7 +159,17 @@ def read_scan_source(args):
         pattern = stare(azimuth, elevation, ranges, n_rays=args.n_rays or 1, **kw)
     else:
         pattern = spinner_rosette(ranges, n_points=args.n_rays or 400, n_sub=n_sub)
-    return pattern, float(gate)
+    return (pattern, float(gate), None) if with_file else (pattern, float(gate))
+
+
+def measured_los(scan):
+    """``(los, title)``: a scan file's own Doppler ``(r, g)`` m/s, NaN where the instrument's
+    data are rejected (a Halo file: intensity below `lidarjax.io.INTENSITY_THRESHOLD`; a
+    Windcube file: its status), and a title naming the file and the rejection."""
+    name = Path(scan.path).name
+    if isinstance(scan, HaloScan):
+        return scan.radial_velocity(), f"measured, {name}\n(intensity < {INTENSITY_THRESHOLD:g})"
+    return scan.radial_velocity(), f"measured, {name}\n(instrument status rejected)"
 
 
 def make_pattern(args):
@@ -289,37 +308,164 @@ def rhi_plane(directions, elevation, rel) -> np.ndarray:
     return np.asarray(rel)[..., 0] * axis[0] + np.asarray(rel)[..., 1] * axis[1]
 
 
-def plot_scan(res, kind: str, path) -> None:
-    """The last scan's LOS on its geometry: a PPI (or any scan) seen from above on its cone
-    (horizontal distance east and north of the lidar), an RHI on its vertical plane
-    (horizontal distance along the azimuth, height). Written atomically."""
-    import matplotlib  # noqa: PLC0415 - optional extra, imported when drawing
+def _edges(centres: np.ndarray, fallback: float) -> np.ndarray:
+    """Cell edges ``(n + 1,)`` around sorted `centres` ``(n,)``: midpoints, the outer two half
+    a step out (`fallback` the width of a single cell)."""
+    c = np.asarray(centres, np.float64)
+    if c.size == 1:
+        return np.array([c[0] - fallback / 2, c[0] + fallback / 2])
+    mid = (c[1:] + c[:-1]) / 2
+    return np.concatenate([[c[0] - (mid[0] - c[0])], mid, [c[-1] + (c[-1] - mid[-1])]])
 
+
+def _ray_half_widths(angle: np.ndarray, *, circular: bool) -> np.ndarray:
+    """Half the angular width (degrees) of each ray's cell: half the gap to its nearest
+    neighbour in angle (around the circle for azimuths), 0.5 where every ray shares one
+    angle."""
+    a = np.asarray(angle, np.float64) % 360 if circular else np.asarray(angle, np.float64)
+    distinct = np.unique(np.round(a, 6))
+    if distinct.size < 2:
+        return np.full(a.shape, 0.5)
+    if circular:
+        ext = np.concatenate([distinct - 360, distinct, distinct + 360])
+    else:
+        ext = np.concatenate([[2 * distinct[0] - distinct[1]], distinct,
+                              [2 * distinct[-1] - distinct[-2]]])
+    idx = np.searchsorted(ext, np.round(a, 6))
+    gap = np.minimum(ext[idx] - ext[idx - 1], ext[idx + 1] - ext[idx])
+    return gap / 2
+
+
+def _polar_cells(angle, half, range_edges, *, rhi: bool, steps: int = 4):
+    """Polygons ``(r * g, 2 * steps + 2, 2)`` of the cells between each ray's edges
+    (``angle -+ half``, degrees) and its gates' ends `range_edges` ``(g + 1,)`` m: seen from
+    above for azimuths (``x = r sin a``, ``y = r cos a``; ranges on the ground), in the
+    vertical plane for elevations (``x = r cos e``, ``z = r sin e``)."""
+    t = np.linspace(-1.0, 1.0, steps + 1)
+    ang = np.radians(np.asarray(angle)[:, None] + np.asarray(half)[:, None] * t[None])  # (r, s)
+    near, far = range_edges[:-1], range_edges[1:]  # (g,)
+    th = np.concatenate([ang, ang[:, ::-1]], axis=1)  # (r, 2s): along the near edge, back the far
+    rad = np.concatenate([near[:, None].repeat(t.size, 1), far[:, None].repeat(t.size, 1)], axis=1)
+    if rhi:
+        x = rad[None] * np.cos(th)[:, None]
+        y = rad[None] * np.sin(th)[:, None]
+    else:
+        x = rad[None] * np.sin(th)[:, None]
+        y = rad[None] * np.cos(th)[:, None]
+    return np.stack([x, y], axis=-1).reshape(-1, 2 * t.size, 2)
+
+
+def _rings(ax, r_max: float, *, upper: bool) -> None:
+    """Range rings at round ranges up to `r_max` m, labelled in m (a half circle above the
+    horizon for an RHI)."""
+    from matplotlib.ticker import MaxNLocator  # noqa: PLC0415
+
+    ticks = [v for v in MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]).tick_values(0, r_max)
+             if 0 < v <= r_max * 1.001]
+    phi = np.linspace(0, np.pi if upper else 2 * np.pi, 181)
+    for v in ticks:
+        ax.plot(v * np.cos(phi), v * np.sin(phi), color="0.35", lw=0.6, zorder=3)
+        label_at = np.radians(80.0 if upper else 45.0)
+        ax.annotate(f"{v:g} m", (v * np.cos(label_at), v * np.sin(label_at)), fontsize=7,
+                    color="0.2", ha="left", va="bottom", zorder=4,
+                    bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none", alpha=0.7))
+
+
+def _scan_panel(ax, geometry, values, kind, norm, cmap, title):
+    """One panel: the gates of `values` ``(r, g)`` as cells of the scan's geometry."""
+    from matplotlib.collections import PolyCollection  # noqa: PLC0415
+
+    az, el, ranges, times = geometry
+    r_edges = np.maximum(_edges(ranges, ranges[0] if ranges.size else 1.0), 0.0)
+    if kind == "stare":  # one direction: time against range
+        t_edges = _edges(times, 1.0)
+        mesh = ax.pcolormesh(t_edges, r_edges, values.T, cmap=cmap, norm=norm, shading="flat")
+        ax.set_xlabel("time from the first ray's start (s)")
+        ax.set_ylabel("range along the beam (m)")
+        ax.set_title(title, fontsize=9)
+        return mesh
+    rhi = kind == "rhi"
+    angle = el if rhi else az
+    half = _ray_half_widths(angle, circular=not rhi)
+    if not rhi:  # seen from above: the ground range of each gate's ends
+        cos_el = np.cos(np.radians(np.mean(el)))
+        r_plot = r_edges * cos_el
+    else:
+        r_plot = r_edges
+    steps = int(np.clip(np.ceil(np.max(half)), 2, 45))  # arcs drawn in steps of 2 degrees or less
+    cells = _polar_cells(angle, half, r_plot, rhi=rhi, steps=steps)
+    coll = PolyCollection(cells, array=np.ma.masked_invalid(values.ravel()), cmap=cmap, norm=norm,
+                          linewidths=0, antialiaseds=False)
+    ax.add_collection(coll)
+    r_max = float(r_plot[-1])
+    _rings(ax, r_max, upper=rhi)
+    lo, hi = cells.reshape(-1, 2).min(axis=0), cells.reshape(-1, 2).max(axis=0)
+    pad = 0.04 * r_max
+    ax.set_xlim(min(lo[0], 0.0) - pad, max(hi[0], 0.0) + pad)
+    ax.set_ylim(min(lo[1], 0.0) - pad, max(hi[1], 0.0) + pad)
+    if rhi:
+        ax.set_xlabel("horizontal distance along the azimuth (m)")
+        ax.set_ylabel("height above the lidar (m)")
+    else:
+        ax.set_xlabel("east of the lidar, CFD x (m)")
+        ax.set_ylabel("north of the lidar, CFD y (m)")
+    ax.set_aspect("equal")
+    ax.set_title(title, fontsize=9)
+    return coll
+
+
+def scan_geometry(res):
+    """``(azimuth, elevation, ranges, times)`` of a result's rays for drawing: azimuth
+    (degrees clockwise from CFD ``+y``) and elevation (above the CFD horizon) of each ray's
+    direction in the CFD frame (so a rotated mount draws where its rays go), gate-centre
+    ranges (m) and ray times (s, the last scan)."""
+    d = np.asarray(res.directions, np.float64)
+    az = np.degrees(np.arctan2(d[:, 0], d[:, 1]))
+    el = np.degrees(np.arcsin(np.clip(d[:, 2], -1.0, 1.0)))
+    times = np.asarray(res.times, np.float64).reshape(-1, d.shape[0])[-1]
+    return az, el, np.asarray(res.ranges, np.float64), times
+
+
+def plot_scan(res, kind: str, path, *, measured=None, measured_title: str = "measured") -> None:
+    """The last scan's LOS as radar displays draw it: each gate a filled cell between its
+    ray's edges (half-way to the neighbouring rays) and its gate's ends (half-way to the
+    neighbouring gates), coloured on a diverging map centred on zero. A PPI or VAD seen from
+    above with labelled range rings (ground range, CFD x east and y north), an RHI on its
+    vertical plane with labelled range arcs, a stare as time against range; other scans as
+    a PPI. `measured` ``(r, g)`` (m/s, NaN where the instrument's data were rejected) is
+    drawn beside the simulation on the same colour scale, its rejected gates grey
+    (`measured_title` names the source and threshold). Written atomically; needs the
+    ``plot`` extra (matplotlib)."""
+    matplotlib = import_optional("matplotlib", "plot", "Drawing the scan")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
+    from matplotlib.colors import Normalize  # noqa: PLC0415
 
-    los = np.asarray(res.los)
+    los = np.asarray(res.los, np.float64)
     los = los.reshape(-1, *los.shape[-2:])[-1]
-    pts = np.asarray(res.points)
-    origin = pts[:, 0] - np.asarray(res.ranges)[0] * np.asarray(res.directions)
-    rel = pts - origin[:, None, :]
-    fig, ax = plt.subplots(figsize=(6, 5))
-    if kind == "rhi":
-        x, y = rhi_plane(res.directions, res.elevation, rel), rel[..., 2]
-        ax.set_xlabel("horizontal distance in the scan's plane (m)")
-        ax.set_ylabel("height above the lidar (m)")
-        ax.set_title("RHI on its vertical plane")
-    else:
-        x, y = rel[..., 0], rel[..., 1]
-        ax.set_xlabel("x from the lidar, CFD frame (m)")
-        ax.set_ylabel("y from the lidar, CFD frame (m)")
-        ax.set_title(f"{kind.upper()} on its cone, seen from above")
-    lim = np.nanmax(np.abs(los)) if np.isfinite(los).any() else 1.0
+    geometry = scan_geometry(res)
+    shown = [los] + ([np.asarray(measured, np.float64)] if measured is not None else [])
+    # symmetric about zero: the simulation's largest |LOS| and the measured 99th percentile
+    # (a few noisy gates do not wash out the rest)
+    sim = np.abs(los[np.isfinite(los)])
+    meas = np.abs(shown[-1][np.isfinite(shown[-1])]) if measured is not None else np.zeros(0)
+    lim = max(float(sim.max()) if sim.size else 0.0,
+              float(np.percentile(meas, 99)) if meas.size else 0.0)
     lim = lim if math.isfinite(lim) and lim > 0 else 1.0
-    sc = ax.scatter(x.ravel(), y.ravel(), c=los.ravel(), s=4, cmap="RdBu_r", vmin=-lim, vmax=lim)
-    ax.set_aspect("equal")
-    fig.colorbar(sc, ax=ax, label="LOS velocity (m/s, + away)")
-    fig.tight_layout()
+    norm = Normalize(-lim, lim)
+    cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="0.75")
+    draw = kind if kind in ("ppi", "rhi", "stare", "vad") else "ppi"
+    name = {"ppi": "PPI", "vad": "VAD", "rhi": "RHI", "stare": "stare"}[draw]
+    n = len(shown)
+    fig, axes = plt.subplots(1, n, figsize=(5.2 * n + 1.2, 5.0), squeeze=False, layout="constrained")
+    axes = axes[0]
+    panels = [(los, f"simulated {name}")]
+    if measured is not None:
+        panels.insert(0, (shown[1], f"{measured_title}; grey: rejected"))
+    for ax, (values, title) in zip(axes, panels, strict=True):
+        artist = _scan_panel(ax, geometry, values, draw, norm, cmap, title)
+    fig.colorbar(artist, ax=list(axes), label="LOS velocity (m/s, + away from the lidar)",
+                 extend="both", shrink=0.85)
     try:
         with atomic_path(path) as tmp:
             fig.savefig(tmp, dpi=110, format="png")

@@ -25,6 +25,7 @@ from ._scanning import (
     add_scan_pattern_arguments,
     describe,
     make_pattern,
+    measured_los,
     plot_scan,
     read_scan_source,
 )
@@ -74,7 +75,9 @@ def register(sub) -> None:
     p.add_argument("--roll", type=finite_float, default=0.0, help="degrees")
     p.add_argument("--scans", type=positive_int, default=1, help="repetitions flown through time")
     p.add_argument("--out", default="scan.nc", help="CF NetCDF output (default scan.nc)")
-    p.add_argument("--plot", default=None, help="PNG of the scan on its cone or plane")
+    p.add_argument("--plot", default=None,
+                   help="PNG of the scan as radar displays draw it (filled gate cells, range rings); "
+                        "for a scan file, its own measured Doppler beside the simulated")
     p.set_defaults(func=run)
 
 
@@ -82,7 +85,7 @@ def run(args) -> int:
     inputs = [("scan", args.scan), ("--field", args.field)]
     out = check_output_file(args.out, inputs=inputs)
     plot = check_output_file(args.plot, inputs=inputs, option="--plot") if args.plot else None
-    pattern, gate = read_scan_source(args)
+    pattern, gate, scan_file = read_scan_source(args, with_file=True)
     if args.field:
         check_field_file(args.field)
         field = load_field(args.field)
@@ -99,6 +102,10 @@ def run(args) -> int:
                       ray_time=res.times, flags=res.flags, title=f"lidarjax scan {args.scan}")
     print(f"{describe(res, pattern.kind)}; wrote {out}")
     if plot is not None:
-        plot_scan(res, pattern.kind, plot)
+        if scan_file is None:
+            plot_scan(res, pattern.kind, plot)
+        else:  # the file's own Doppler beside the simulation
+            los, title = measured_los(scan_file)
+            plot_scan(res, pattern.kind, plot, measured=los, measured_title=title)
         print(f"wrote {plot}")
     return 0

@@ -308,13 +308,18 @@ def run_scanning(args, settings, beta, location, heights, start) -> int:
     """A scanning scan flown through the frozen-turbulence field (module docs)."""
     if args.ti <= 0:
         raise ValueError(f"--ti must be positive, got {args.ti}")
-    pattern, gate = read_scan_source(args)
+    pattern, gate, scan_file = read_scan_source(args, with_file=True)
     if args.probe == "auto":
         args.probe = "pulsed"
     probe = scanning_probe(args, gate)
     period = float(pattern.period)
     n_scans = args.scans or max(1, math.ceil(args.hours * 3600.0 / period - 1e-9))
-    vad = pattern.kind in ("ppi", "vad") and pattern.n_rays >= 3  # a fit needs 3 rays
+    # a Halo file of repeated scans (rays a whole number of the header's scans): one VAD
+    # profile per scan of the file, each with its own rays' angles
+    per_scan = getattr(scan_file, "rays_per_scan", None)
+    if not per_scan or pattern.n_rays % per_scan:
+        per_scan = pattern.n_rays
+    vad = pattern.kind in ("ppi", "vad") and per_scan >= 3  # a fit needs 3 rays
     files = ["series_scan.nc"] + ([] if args.no_plots else ["series_scan.png"]) + (
         ["series_vad.csv"] if vad else [])
     inputs = [("settings", args.settings), ("--field", None if args.field == "uniform"
@@ -358,28 +363,35 @@ def run_scanning(args, settings, beta, location, heights, start) -> int:
                                elevation=res.elevation, ranges=res.ranges, ray_time=times,
                                flags=flags, title=f"lidarjax series {args.scan}", attrs=meta)]
     if vad:
-        wrote.append(write_vad_csv(out / "series_vad.csv", res, meta))
+        wrote.append(write_vad_csv(out / "series_vad.csv", res, meta, rays_per_scan=per_scan))
     if not args.no_plots:
         plot_scan(res, pattern.kind, out / "series_scan.png")
         wrote.append(out / "series_scan.png")
     print(f"{describe(res, pattern.kind)}")
     if pattern.kind in ("ppi", "vad") and not vad:
-        print(f"no VAD profile: the scan has {pattern.n_rays} rays, a fit needs 3")
+        print(f"no VAD profile: the scan has {per_scan} rays, a fit needs 3")
     print("wrote " + ", ".join(str(w) for w in wrote))
     return 0
 
 
-def write_vad_csv(path, res, metadata):
+def write_vad_csv(path, res, metadata, *, rays_per_scan: int | None = None):
     """The VAD wind profile of every scan of `res` (`lidarjax.scanning.vad_fit`, per gate) as
     a self-describing CSV (`lidarjax.io.write_table_csv`): one row per (scan, gate), the wind
     in the instrument's frame (``u`` towards its azimuth 90, ``v`` towards its azimuth 0,
     ``w`` up) and its meteorological direction there (where it comes from, clockwise from
-    the instrument's azimuth 0)."""
+    the instrument's azimuth 0). `rays_per_scan`: the pattern's rays are that many scans
+    (a Halo file of repeated VADs), each fitted with its own rays; default all rays one
+    scan."""
     los = np.asarray(res.los)
-    prof = vad_fit(los, res.azimuth, res.elevation, res.ranges)
-    n, _, g = los.shape
+    reps, r, g = los.shape
+    m = rays_per_scan if rays_per_scan and r % rays_per_scan == 0 else r
+    n = reps * (r // m)
+    los = los.reshape(n, m, g)
+    az = np.broadcast_to(np.asarray(res.azimuth, np.float64).reshape(-1, m), (reps, r // m, m))
+    el = np.broadcast_to(np.asarray(res.elevation, np.float64).reshape(-1, m), (reps, r // m, m))
+    prof = vad_fit(los, az.reshape(n, m), el.reshape(n, m), res.ranges)
     vel = np.asarray(prof.velocity).reshape(n * g, 3)
-    times = np.asarray(res.times)
+    times = np.asarray(res.times).reshape(n, m)
     cols = {
         "scan": np.repeat(np.arange(n), g),
         "time": np.repeat(times.mean(axis=1), g),

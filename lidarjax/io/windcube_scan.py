@@ -13,6 +13,17 @@ naming it and what is missing. When present, the instrument's own products are r
 ``horizontal_wind_speed`` (m/s), ``wind_direction`` (degrees, where the wind comes from,
 clockwise from true north), ``vertical_wind_speed`` (m/s, up) and ``wind_speed_status``.
 
+**Ray times.** ``time`` is the *end* of each ray's accumulation. The evidence is the
+instrument's software, which says so in every file it writes (real 200S DBS, server 3.3.0):
+``time`` is "Number of seconds between time_reference and the end of each ray
+measurement", ``timestamp`` is the "Timestamp at the end of each ray measurement", and
+``azimuth``/``elevation`` are the head's angles "when each measurement finished". That the
+first ray's time equals the time in the file's name (``..._2021-07-01_13-03-28_...``,
+first ray 13:03:28.088) does not make it a start: the name is that first end time cut to
+the second. The first ray began ``ray_accumulation_time`` (2000 ms) earlier; the rays are
+2.95 to 5.46 s apart, more than an accumulation. `WindcubeScan.pattern` starts every ray
+one accumulation before its time (tests/io/test_windcube_scan.py).
+
 Angles and ranges are read as stored: ``azimuth``/``elevation`` are the scanning head's
 encoder angles at the end of each ray, ``range`` the gate centres the processing used. The
 two need not agree. In the committed Windcube 200S DBS (server 3.3.0, rays N, vertical, S, W,

@@ -61,15 +61,17 @@ class VadProfile(eqx.Module):
         return horizontal_speed(self.velocity)
 
 
-def vad_fit(los: Float[ArrayLike, "*batch r g"], azimuth: Float[ArrayLike, " r"],
-            elevation: Float[ArrayLike, " r"], ranges: Float[ArrayLike, " g"]) -> VadProfile:
+def vad_fit(los: Float[ArrayLike, "*batch r g"], azimuth: Float[ArrayLike, "*#batch r"],
+            elevation: Float[ArrayLike, "*#batch r"], ranges: Float[ArrayLike, " g"]) -> VadProfile:
     """Least-squares VAD/DBS fit per gate (module docs).
 
     **Arguments:**
 
     - `los`: ``(..., r, g)`` LOS velocities, m/s, positive away from the lidar (NaN: not used).
     - `azimuth`, `elevation`: ``(r,)`` ray angles, degrees (clockwise from the instrument's
-      north, above its horizon); `elevation` may be one angle.
+      north, above its horizon); `elevation` may be one angle. Per scan, ``(..., r)`` with
+      the leading axes of `los` (or broadcasting to them): each scan of a repeated VAD
+      fitted with its own angles (`lidarjax.io.HaloScan.per_scan`).
     - `ranges`: ``(g,)`` gate-centre ranges, m.
 
     **Returns:** a `VadProfile`. Jit-compiled and differentiable in every input.
@@ -81,9 +83,17 @@ def vad_fit(los: Float[ArrayLike, "*batch r g"], azimuth: Float[ArrayLike, " r"]
         raise ValueError(f"vad_fit: `los` must be (..., rays, gates), got shape {los.shape}.")
     r = los.shape[-2]
     az = jnp.asarray(azimuth, los.dtype)
-    el = jnp.broadcast_to(jnp.asarray(elevation, los.dtype), az.shape)
-    if az.shape != (r,):
-        raise ValueError(f"vad_fit: `azimuth` must hold one angle per ray ({r},), got {az.shape}.")
+    if az.ndim < 1 or az.shape[-1] != r or az.ndim > los.ndim - 1:
+        raise ValueError(f"vad_fit: `azimuth` must hold one angle per ray ({r},) (per scan: "
+                         f"(..., {r})), got {az.shape}.")
+    el = jnp.asarray(elevation, los.dtype)
+    shape = jnp.broadcast_shapes(az.shape, el.shape)
+    try:
+        jnp.broadcast_shapes(shape, los.shape[:-1])
+    except ValueError:
+        raise ValueError(f"vad_fit: angles of shape {shape} do not broadcast to the rays of `los` "
+                         f"{los.shape[:-1]}.") from None
+    az, el = jnp.broadcast_to(az, shape), jnp.broadcast_to(el, shape)
     ranges = jnp.asarray(ranges, los.dtype)
     if ranges.shape != los.shape[-1:]:
         raise ValueError(f"vad_fit: `ranges` must hold one range per gate {los.shape[-1:]}, got "
@@ -92,12 +102,12 @@ def vad_fit(los: Float[ArrayLike, "*batch r g"], azimuth: Float[ArrayLike, " r"]
 
 
 def _vad(los, az, el, ranges):
-    n = ray_unit_vectors(az, el)  # (r, 3)
+    n = ray_unit_vectors(az, el)  # (..., r, 3)
     ok = jnp.isfinite(los)  # (..., r, g)
     w = ok.astype(los.dtype)
     y = jnp.where(ok, los, 0)
-    a = jnp.einsum("...rg,ri,rj->...gij", w, n, n, precision=jax.lax.Precision.HIGHEST)
-    b = jnp.einsum("...rg,ri->...gi", w * y, n, precision=jax.lax.Precision.HIGHEST)
+    a = jnp.einsum("...rg,...ri,...rj->...gij", w, n, n, precision=jax.lax.Precision.HIGHEST)
+    b = jnp.einsum("...rg,...ri->...gi", w * y, n, precision=jax.lax.Precision.HIGHEST)
     count = jnp.sum(ok, axis=-2)  # (..., g)
     lam = jnp.linalg.eigvalsh(a)  # ascending
     regular = lam[..., 0] > 1e-12 * lam[..., -1]  # the rays span 3-D
@@ -107,7 +117,7 @@ def _vad(los, az, el, ranges):
     v = jnp.linalg.solve(a_safe, jnp.where(enough[..., None], b, 0)[..., None])[..., 0]
     lam_safe = jnp.where(enough[..., None], lam, 1)
     cond = jnp.sqrt(lam_safe[..., -1] / lam_safe[..., 0])
-    resid = jnp.where(ok, y - jnp.einsum("ri,...gi->...rg", n, v), 0)
+    resid = jnp.where(ok, y - jnp.einsum("...ri,...gi->...rg", n, v), 0)
     ms = jnp.sum(resid**2, axis=-2) / jnp.maximum(count, 1)
     rms = safe_sqrt(ms)  # finite gradient at 0
     flags = jnp.where(count >= 3, 0, int(InverseFlag.TOO_FEW_BEAMS))

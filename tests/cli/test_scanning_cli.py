@@ -16,7 +16,7 @@ from lidarjax.cli import main
 from lidarjax.cli._scanning import scan_region
 from lidarjax.io import Settings, read_scan_netcdf, read_table_csv, save_field_npz, write_settings
 
-from ..helpers import DATA
+from ..helpers import DATA, scanning_file, write_hpl
 
 pytest.importorskip("xarray")
 
@@ -296,3 +296,57 @@ def test_series_on_a_mesh_is_its_cellpoint_at_the_gates(tmp_path, capsys, monkey
     pattern = lj.scanning.ppi(40.0, back["range"], n_rays=8, accumulation=0.5)
     graded = np.asarray(lj.scanning.simulate_scan(grid, pattern, lj.Mount(roof)).los)
     assert np.nanmax(np.abs(graded - expect)) > 1e-3
+
+
+def _hour_of_vad(path):
+    """An hour of a 6-ray VAD at 75 degrees (a scan every 300 s, rays 8 s apart, 5 gates of
+    30 m) written in the real Halo layout: (file, ray seconds from the first ray)."""
+    seconds = (np.arange(12)[:, None] * 300.0 + np.arange(6)[None] * 8.0).ravel()
+    az = (np.arange(72) * 60.0 + np.repeat(np.arange(12) * 7.0, 6)) % 360
+    write_hpl(path, hours=9.0 + seconds / 3600, azimuth=az, elevation=np.full(72, 75.0),
+              doppler=np.zeros((72, 5)), scan_type="VAD", rays_per_scan=6)
+    return path, seconds
+
+
+def test_simulate_an_hour_of_vad_every_ray_at_its_own_time(case, tmp_path, capsys):
+    """`simulate --scan FILE.hpl` of a one-hour file: every ray of its 12 scans, each at its
+    own time (the file's, independent of the reader: from the hours written) and angles."""
+    root, settings = case
+    hpl, seconds = _hour_of_vad(tmp_path / "VAD_99_20240301_090000.hpl")
+    out = tmp_path / "hour"
+    assert main(["simulate", str(settings), "--field", str(root / "run_0.npz"), "--beta", "0",
+                 "--scan", str(hpl), "--out", str(out)]) == 0
+    assert "72 rays x 5 gates (vad)" in capsys.readouterr().out
+    back = read_scan_netcdf(out / "scan_0.nc")
+    assert back["radial_velocity"].shape == (1, 72, 5)
+    # ray times: the middle of each 1 s accumulation ending at the ray's time (the file
+    # holds 8 decimals of an hour: 18 us)
+    np.testing.assert_allclose(back["ray_time"][0], seconds + 0.5, atol=2e-5)
+    assert back["ray_time"][0][-1] > 3300.0
+    np.testing.assert_allclose(back["radial_velocity"][0], _closed_form(back, 0.0), atol=1e-9)
+    # series flies the same hour (one repetition) with the same ray times
+    settings_s = _settings(tmp_path / "s.dat", [0.0])
+    assert main(["series", str(settings_s), *SERIES, "--scan", str(hpl), "--scans", "1",
+                 "--no-plots", "--out", str(tmp_path / "series")]) == 0
+    got = read_scan_netcdf(tmp_path / "series" / "series_scan.nc")
+    np.testing.assert_allclose(got["ray_time"][0], seconds + 0.5, atol=2e-5)
+    assert got["radial_velocity"].shape == (1, 72, 5) and np.isfinite(got["radial_velocity"]).all()
+    # one VAD profile per scan of the file (12 x 5 gates), each from its own 6 rays
+    table = read_table_csv(tmp_path / "series" / "series_vad.csv").columns
+    np.testing.assert_array_equal(table["scan"], np.repeat(np.arange(12), 5))
+    np.testing.assert_array_equal(table["n_rays"], 6)
+    np.testing.assert_allclose(table["time"][::5], got["ray_time"][0].reshape(12, 6).mean(axis=1))
+    los, az = got["radial_velocity"][0].reshape(12, 6, 5), got["azimuth"].reshape(12, 6)
+    prof = lj.scanning.vad_fit(los[7], az[7], 75.0, got["range"])  # the eighth scan alone
+    np.testing.assert_allclose(table["u"][35:40], np.asarray(prof.velocity)[:, 0], atol=1e-9)
+
+
+def test_simulate_the_real_two_scan_stare(case, tmp_path, capsys):
+    """The real Eriswil stare (header 1 ray per scan, 2 held): both rays, 2.02 s apart."""
+    root, settings = case
+    hpl = scanning_file("Stare_91_20221214_11.hpl")
+    assert main(["simulate", str(settings), "--field", str(root / "run_0.npz"), "--beta", "0",
+                 "--scan", str(hpl), "--probe", "point", "--out", str(tmp_path)]) == 0
+    back = read_scan_netcdf(tmp_path / "scan_0.nc")
+    assert back["radial_velocity"].shape[:2] == (1, 2)
+    np.testing.assert_allclose(np.diff(back["ray_time"][0]), 2.020032, atol=1e-5)

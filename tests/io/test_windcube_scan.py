@@ -56,6 +56,29 @@ def test_reader_matches_h5py(dbs, dbs_path):
     np.testing.assert_array_equal(dbs.elevation, [75, 90, 75, 75, 75])
 
 
+def test_ray_time_is_the_end_of_each_ray(dbs, dbs_path):
+    """`time` is the end of each ray, as the instrument's software states in the file it
+    wrote (the comments of ``time``, ``timestamp``, ``azimuth`` and ``elevation``, server
+    3.3.0); the file name's 13-03-28 is the first ray's end time (13:03:28.088) cut to the
+    second, so it does not mark a start: the first ray began one accumulation
+    (``ray_accumulation_time``, 2000 ms) earlier, at 13:03:26.088."""
+    with h5py.File(dbs_path, "r") as f:
+        g = f["Sweep_748901"]
+        comments = {k: g[k].attrs["comments"].decode() for k in ("time", "timestamp", "azimuth",
+                                                                  "elevation")}
+        stamps = [np.datetime64(t.decode().rstrip("Z"), "us") for t in g["timestamp"][()]]
+        acc_ms = float(g["ray_accumulation_time"][()])
+    assert "the end of each ray measurement" in comments["time"]
+    assert "at the end of each ray measurement" in comments["timestamp"]
+    assert all("when each measurement finished" in comments[k] for k in ("azimuth", "elevation"))
+    np.testing.assert_array_equal(dbs.time.astype("datetime64[ms]"), np.array(stamps, "datetime64[ms]"))
+    named = np.datetime64(DBS_NAME.split("_")[1] + "T" + DBS_NAME.split("_")[2].replace("-", ":"))
+    assert dbs.time[0].astype("datetime64[s]") == named
+    assert dbs.accumulation == acc_ms * 1e-3 == 2.0
+    # rays 2.95 to 5.46 s apart: more than an accumulation, room for the head's moves
+    assert np.all(np.diff(dbs.seconds()) > dbs.accumulation)
+
+
 def test_real_dbs_fit_and_simulation_in_its_layout(dbs):
     """`vad_fit` of the real LOS; the fitted wind simulated along the file's own rays and
     gates (per-ray ranges) differs from the real LOS by exactly the fit's residual."""
