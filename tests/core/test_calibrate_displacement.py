@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import lidarjax as lj
+from lidarjax.frames import cfd_to_north_rotation
 
 HEIGHTS = np.array([40.0, 80.0, 120.0])
 SCAN = lj.windcube_v2()
@@ -59,21 +60,24 @@ def _records(direction, speed, d_eps, pitch, roll):
 @pytest.mark.parametrize("probe", [lj.PointProbe(), lj.PulsedProbe()], ids=["point", "pulsed"])
 def test_beam_gradient_predicts_the_first_order_change_of_simulate(probe):
     field = _ridge(250.0, 10.0)
-    level = lj.Mount(LOC)
+    # a turned platform and north offset: the gradient comes back in the north frame
+    turned = dict(beta=15.0, gamma=30.0, psi=180.0, epsilon=10.0)
+    level = lj.Mount(LOC, **turned)
+    q = np.asarray(cfd_to_north_rotation(level))
     base = lj.simulate(field, SCAN, level, HEIGHTS, probe=probe)
     g = np.asarray(lj.beam_gradient(field, SCAN, level, HEIGHTS, probe=probe))
-    n = np.asarray(base.directions)  # CFD = north frame for this mount
-    v = np.asarray(field.sample(base.points))
+    n = np.asarray(base.directions) @ q.T
+    v = np.asarray(field.sample(base.points)) @ q.T
     rho = np.asarray(base.ranges)
     # the gradient itself: central differences of the scene at the focus (point probe)
     if isinstance(probe, lj.PointProbe):
         p = np.asarray(base.points)
         fd = np.stack([(np.asarray(field.sample(p + e)) - np.asarray(field.sample(p - e))) / 2e-3
                        for e in 1e-3 * np.eye(3)], -1)
-        np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-9)
-    tilted = lj.simulate(field, SCAN, lj.Mount(LOC, pitch=-0.02, roll=0.03), HEIGHTS,
+        np.testing.assert_allclose(g, q @ fd @ q.T, rtol=1e-6, atol=1e-9)
+    tilted = lj.simulate(field, SCAN, lj.Mount(LOC, pitch=-0.02, roll=0.03, **turned), HEIGHTS,
                          probe=probe)
-    dn = np.asarray(tilted.directions) - n
+    dn = np.asarray(tilted.directions) @ q.T - n
     turned_only = np.asarray(base.los) + np.einsum("bk,hbk->hb", dn, v)
     moved = turned_only + rho * np.einsum("bi,hbij,bj->hb", n, g, dn)
     err_turned = np.abs(np.asarray(tilted.los) - turned_only).max()
