@@ -118,10 +118,9 @@ def test_calibration_model_jacobians_match_central_differences(table, with_refer
     beta = nuisance
     theta = np.array([2.0, 0.7, -0.4])
     model, _ = _model_of(table, np.float64, north_offset)
-    sens = model.sensitivity(theta)  # held fixed within a pass (relinearised between them)
     # compiled once for the model, its Jacobians and every difference (eagerly, each call
     # dispatched its operations one by one)
-    model_jac = jax.jit(lambda b, t: _model_and_jacobian(model, b, t, sens, ref_dir, hidx))
+    model_jac = jax.jit(lambda b, t: _model_and_jacobian(model, b, t, ref_dir, hidx))
     model, jb, jt = model_jac(beta, theta)
     eps = 1e-6
     for k in range(beta.shape[1]):
