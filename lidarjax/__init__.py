@@ -11,6 +11,8 @@ constants (``lidarjax.sensitivity.OUTPUTS``) are reached through them.
 1. the core (the differentiable model): ``frames``, ``angles``, ``mount``, ``scan``, ``probe``,
    ``field``, ``forward``, ``batch``, ``response``, ``inverse``, ``sensitivity``, ``timing``,
    ``motion``, ``series``, ``spectral``, ``turbulence`` and the others at the package root;
+1.5. ``design/``: design by gradients (where to put a lidar, which scan to run), optimised
+   through the core;
 2. ``scenes/``: analytic flows, wind farms, frozen turbulence;
 3. ``io/``: one module per file-format family;
 4. ``plots.py``: figures of the core's results (matplotlib, imported only when drawing);
@@ -41,6 +43,20 @@ from .batch import unstack_mounts as unstack_mounts
 from .calibrate import Calibration as Calibration
 from .calibrate import calibrate as calibrate
 from .corrections import correction_factors as correction_factors
+from .design import DualDopplerDesign as DualDopplerDesign
+from .design import Placement as Placement
+from .design import RegionBox as RegionBox
+from .design import RegionPolygon as RegionPolygon
+from .design import RegionRing as RegionRing
+from .design import VadDesign as VadDesign
+from .design import design_dual_doppler as design_dual_doppler
+from .design import design_placement as design_placement
+from .design import design_vad as design_vad
+from .design import dual_doppler_variance as dual_doppler_variance
+from .design import evaluate_placements as evaluate_placements
+from .design import placement_objective as placement_objective
+from .design import placement_problem as placement_problem
+from .design import vad_variance as vad_variance
 from .disturbed_sectors import DisturbedSector as DisturbedSector
 from .disturbed_sectors import disturbed_sectors as disturbed_sectors
 from .disturbed_sectors import excluded_width as excluded_width

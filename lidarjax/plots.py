@@ -326,3 +326,57 @@ def plot_farm_map(farm, height, path, *, names=None, lidar=None, beams=None, ext
     ax.set_ylabel("northing - origin (m)")
     ax.set_title(title or f"wake field from {float(farm.direction):g} deg at {float(height):g} m")
     return _save(fig, path)
+
+
+def plot_design(placement, path, *, grid_xy=None, grid_values=None, title=None,
+                outline=None) -> Path:
+    """A placement design (`lidarjax.design_placement`): the objective over the region (the
+    coarse stage's candidates, or `grid_xy` ``(m, 2)`` / `grid_values` ``(m,)`` of a finer
+    map, NaN where infeasible), the start, the local search's path and the optimum (left);
+    the speed correction ``C_U`` against the free-stream direction at the start and at the
+    optimum, first and last height (right). `outline`: ``(n, 2)`` a polygon to draw."""
+    plt = _pyplot()
+    fig, (ax, rax) = plt.subplots(1, 2, figsize=(12, 5), gridspec_kw={"width_ratios": [1, 1.1]})
+    names = list(placement.names)
+    if grid_xy is None:
+        grid_xy, grid_values = placement.coarse[:, :2], placement.coarse_values
+    xy = np.asarray(grid_xy, np.float64)
+    v = np.asarray(grid_values, np.float64)
+    ok = np.isfinite(v)
+    if ok.sum() >= 16:
+        art = ax.tricontourf(xy[ok, 0], xy[ok, 1], v[ok], levels=24, cmap="viridis")
+    else:
+        art = ax.scatter(xy[ok, 0], xy[ok, 1], c=v[ok], s=30, cmap="viridis")
+    if (~ok).any():
+        ax.scatter(xy[~ok, 0], xy[~ok, 1], c="0.5", s=6, marker="x", label="infeasible")
+    fig.colorbar(art, ax=ax, label="objective")
+    if outline is not None:
+        o = np.asarray(outline, np.float64)
+        ax.plot(np.append(o[:, 0], o[0, 0]), np.append(o[:, 1], o[0, 1]), "k-", lw=0.8)
+    p = np.asarray(placement.path)
+    if p.size and p.shape[1] >= 2:
+        ax.plot(p[:, 0], p[:, 1], "w.-", lw=1.0, ms=4, label="local search path")
+        ax.plot(p[0, 0], p[0, 1], "o", mfc="none", mec="r", ms=9, label="start")
+        ax.plot(placement.x[0], placement.x[1], "r*", ms=14, label="optimum")
+    ax.set_xlabel(f"{names[0]} (m)")
+    ax.set_ylabel(f"{names[1] if len(names) > 1 else ''} (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=7, loc="lower right", framealpha=0.8)
+    ax.set_title("objective over the region", fontsize=10)
+    if placement.rose is not None and placement.rose_start is not None:
+        for rose, style, lab in ((placement.rose_start, "--", "start"),
+                                 (placement.rose, "-", "optimum")):
+            d = np.asarray(rose.directions)
+            r = np.asarray(rose.speed_ratio)
+            for j in sorted({0, r.shape[1] - 1}):
+                rax.plot(d, r[:, j], style, marker="o", ms=3, lw=1.2, color=f"C{j and 1}",
+                         label=f"{lab}, height {j + 1} of {r.shape[1]}")
+        rax.axhline(1.0, color="0.6", lw=0.8)
+        rax.set_xlabel("free-stream direction (deg)")
+        rax.set_ylabel("C_U = U_free / U_lidar")
+        rax.set_xlim(-5, 365)
+        rax.legend(fontsize=7)
+        rax.set_title("speed correction at the start and at the optimum", fontsize=10)
+    fig.suptitle(title or "lidar placement design")
+    fig.tight_layout()
+    return _save(fig, path)

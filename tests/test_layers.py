@@ -6,6 +6,8 @@ Layers, lowest first (each may import only itself and the ones before it):
 
 0. shared helpers: ``lidarjax._util``, ``lidarjax._precision``, ``lidarjax._deprecated``;
 1. the core (every other module at the package root except ``plots``, and ``lidarjax.scanning``);
+1.5. ``lidarjax.design`` (optimisation through the core: it imports the core, the core never
+   imports it);
 2. ``lidarjax.scenes``;
 3. ``lidarjax.io``;
 4. ``lidarjax.plots``;
@@ -34,10 +36,12 @@ OPTIONAL = {"matplotlib", "xarray", "dask", "distributed", "floris", "meshio", "
             "tqdm", "pandas", "h5netcdf", "h5py", "foamlib", "netCDF4"}
 
 
-def layer(module: str) -> int:
+def layer(module: str) -> float:
     if module in HELPERS:
         return 0
     parts = module.split(".")
+    if len(parts) >= 2 and parts[1] == "design":  # above the core it optimises through
+        return 1.5
     if len(parts) == 2 and parts[1] not in ("scenes", "io", "plots", "workflows", "cli"):
         return 1
     if parts[1] == "scanning":  # a core subpackage (scanning lidars)
@@ -158,6 +162,8 @@ def test_the_layering_rule_is_not_vacuous():
     assert ("lidarjax.io.tables", "lidarjax.response") in seen
     assert layer("lidarjax.forward") == 1 and layer("lidarjax.io.sta") == 3
     assert layer("lidarjax.cli.farm") == 6
+    assert layer("lidarjax.design.placement") == 1.5 and layer("lidarjax.design") == 1.5
+    assert ("lidarjax.design.placement", "lidarjax.forward") in seen
 
 
 # -- the public API ---------------------------------------------------------------------------
