@@ -23,8 +23,13 @@ What it measures, on one (200, 200, 100, 3) gridded field (the hill scene, 10 m 
   `lidarjax.GridField.crop` to `lidarjax.scan_bounds` saves.
 - agreement: the largest absolute LOS difference between the three implementations.
 
+- **target**: the size the project's speed target names: a pulsed probe with 33 nodes,
+  180 platform rotations x 50 heights (N = 1.485e6), lidarjax and numba run interleaved on
+  the same points (a shared machine's load falls on both alike), medians and load average.
+
 Run ``python benchmarks/forward.py [--quick]`` (needs the ``bench`` extra: numba and
-matplotlib). Writes ``benchmarks/results/forward.json`` and ``forward.png``.
+matplotlib); ``--target`` runs only the target size into the existing JSON. Writes
+``benchmarks/results/forward.json`` and ``forward.png``.
 """
 
 # ruff: noqa: B023 -- the timing lambdas run inside the loop iteration that defines them
@@ -80,11 +85,11 @@ def rotation_z(deg):
                      np.stack([o, o, i], -1)], -2)
 
 
-def numpy_setup(mounts):
+def numpy_setup(mounts, heights=HEIGHTS, probe=PROBE):
     """What the numpy pipelines take as given: mount angles and the probe's nodes."""
     n_lidar = np.asarray(SCAN.directions(), np.float64)
-    ranges = HEIGHTS[:, None] / n_lidar[None, :, 2]
-    offsets, weights = (np.asarray(a, np.float64) for a in PROBE.nodes(jnp.asarray(ranges)))
+    ranges = heights[:, None] / n_lidar[None, :, 2]
+    offsets, weights = (np.asarray(a, np.float64) for a in probe.nodes(jnp.asarray(ranges)))
     angles = {k: np.array([float(getattr(m, k)) for m in mounts])
               for k in ("beta", "gamma", "psi", "epsilon")}
     return dict(n_lidar=n_lidar, ranges=ranges, offsets=offsets, weights=weights, **angles)
@@ -214,10 +219,10 @@ def numba_pipeline(vel, lo, inv, setup, dtype):
     return out, reconstruct_v2(out, setup)
 
 
-def lidarjax_fn():
+def lidarjax_fn(probe=PROBE):
     def run(field, mounts, heights):
         sims = jax.vmap(
-            lambda m: lj.simulate(field, SCAN, m, heights, probe=PROBE, point_reference=False)
+            lambda m: lj.simulate(field, SCAN, m, heights, probe=probe, point_reference=False)
         )(mounts)
         return sims.los, sims.lidar_velocity
 
@@ -232,12 +237,82 @@ def speed_loss(velocity, field, mounts, heights):
     return jnp.nansum(sims.lidar_speed)
 
 
+# -- the issue's target: 33 nodes, 180 rotations x 50 heights, interleaved with numba -------
+TARGET_HEIGHTS = np.arange(20.0, 270.0, 5.0)  # 50 heights
+TARGET_SECTORS = 180
+TARGET_PROBE = lj.PulsedProbe(n_nodes=33)
+
+
+def target(field64, repeats):
+    """The forward pipeline at the size the project's target names (a pulsed probe with 33
+    nodes, 180 platform rotations x 50 heights, N = 1.485e6 samples) against the numba
+    yardstick on the same points. The two run interleaved (lidarjax, numba, lidarjax, ...),
+    so a shared machine's load falls on both alike; medians, and the load average (1 min)
+    before and after."""
+    rows = []
+    load0 = os.getloadavg()[0]
+    mounts = mounts_for(TARGET_SECTORS)
+    stacked = lj.stack_mounts(mounts)
+    setup = numpy_setup(mounts, TARGET_HEIGHTS, TARGET_PROBE)
+    lo = np.array([X[0], Y[0], Z[0]])
+    inv = (np.array(GRID) - 1) / np.array([X[-1] - X[0], Y[-1] - Y[0], Z[-1] - Z[0]])
+    n = TARGET_SECTORS * TARGET_HEIGHTS.size * SCAN.n_beams * TARGET_PROBE.n_nodes
+    for dtype in (np.float64, np.float32):
+        vel = np.asarray(field64.velocity).astype(dtype)
+        field = lj.GridField(X, Y, Z, jnp.asarray(vel))
+        h = jnp.asarray(TARGET_HEIGHTS, dtype)
+        lo_d, inv_d = lo.astype(dtype), inv.astype(dtype)
+        t = time.perf_counter()
+        compiled = jax.jit(lidarjax_fn(TARGET_PROBE)).lower(field, stacked, h).compile()
+        compile_s = time.perf_counter() - t
+        fj = lambda: jax.block_until_ready(compiled(field, stacked, h))  # noqa: E731
+        fn = lambda: numba_pipeline(vel, lo_d, inv_d, setup, dtype)  # noqa: E731
+        fj(), fn()
+        tj, tn = [], []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            fj()
+            tj.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            fn()
+            tn.append(time.perf_counter() - t)
+        los_j, los_n = np.asarray(fj()[0]), fn()[0]
+        t_j, t_n = float(np.median(tj)), float(np.median(tn))
+        rows.append(dict(dtype=np.dtype(dtype).name, sectors=TARGET_SECTORS,
+                         heights=int(TARGET_HEIGHTS.size), nodes=TARGET_PROBE.n_nodes, samples=n,
+                         compile_s=compile_s, lidarjax_s=t_j, numba_s=t_n,
+                         lidarjax_msps=n / t_j / 1e6, numba_msps=n / t_n / 1e6,
+                         ratio_vs_numba=t_n / t_j,
+                         ratio_runs=[b / a for a, b in zip(tj, tn, strict=True)],
+                         max_abs_los_diff_numba=float(np.nanmax(np.abs(los_j - los_n)))))
+        r = rows[-1]
+        print(f"target {r['dtype']} N={n}: lidarjax {t_j * 1e3:.1f} ms ({r['lidarjax_msps']:.1f} "
+              f"M/s), numba {t_n * 1e3:.1f} ms: {r['ratio_vs_numba']:.2f}x numba "
+              f"(diff {r['max_abs_los_diff_numba']:.1e})")
+    return {"rows": rows, "load_before": load0, "load_after": os.getloadavg()[0],
+            "uptime": os.popen("uptime").read().strip()}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="N up to 1e5, 3 repeats (< 1 min)")
+    parser.add_argument("--target", action="store_true",
+                        help="only the target size (33 nodes, 180 rotations x 50 heights), "
+                             "written into the existing forward.json")
+    parser.add_argument("--repeats", type=int, default=None, help="timed runs per figure")
     args = parser.parse_args()
+    if args.target:
+        field64 = lj.GridField.from_function(HILL.sample, X, Y, Z)
+        out = target(field64, args.repeats or 11)
+        path = RESULTS / "forward.json"
+        data = json.loads(path.read_text()) if path.exists() else {}
+        data["target"] = out
+        data.setdefault("meta", {})["target_machine"] = machine()
+        path.write_text(json.dumps(data, indent=1))
+        print(f"load {out['load_before']:.1f} -> {out['load_after']:.1f}; wrote {path}")
+        return
     sectors = [1, 11, 111] if args.quick else [1, 11, 111, 1111]
-    repeats = 3 if args.quick else 7
+    repeats = args.repeats or (3 if args.quick else 7)
     per_sector = HEIGHTS.size * SCAN.n_beams * PROBE.n_nodes
 
     t0 = time.perf_counter()
@@ -355,8 +430,9 @@ def main():
         repeats=repeats, quick=args.quick, machine=machine(), numba=numba.__version__,
         numba_threads=numba.get_num_threads(),
     )
+    out = target(field64, max(repeats, 5))
     with open(RESULTS / "forward.json", "w") as fh:
-        json.dump({"meta": meta, "rows": rows, "crop": crop}, fh, indent=1)
+        json.dump({"meta": meta, "rows": rows, "crop": crop, "target": out}, fh, indent=1)
     plot(rows, RESULTS / "forward.png")
     print(f"wrote {RESULTS / 'forward.json'} and forward.png")
 

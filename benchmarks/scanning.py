@@ -42,7 +42,7 @@ import numpy as np
 from _common import machine, machine_line, median_time  # noqa: E402
 
 import lidarjax as lj
-from lidarjax.scanning.simulate import _refine
+from lidarjax.beam import pattern_probe as _refine
 
 jax.config.update("jax_enable_x64", True)
 OUT = Path(__file__).resolve().parent / "results"

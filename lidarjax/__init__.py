@@ -9,7 +9,7 @@ constants (``lidarjax.sensitivity.OUTPUTS``) are reached through them.
 **Layers**, each importing only the ones above it in this list, at module top:
 
 1. the core (the differentiable model): ``frames``, ``angles``, ``mount``, ``scan``, ``probe``,
-   ``field``, ``forward``, ``batch``, ``response``, ``inverse``, ``sensitivity``, ``timing``,
+   ``beam``, ``field``, ``forward``, ``batch``, ``response``, ``inverse``, ``sensitivity``, ``timing``,
    ``motion``, ``series``, ``spectral``, ``turbulence`` and the others at the package root;
 1.5. ``design/``: design by gradients (where to put a lidar, which scan to run), optimised
    through the core;
@@ -40,6 +40,9 @@ from .batch import stack_fields as stack_fields
 from .batch import stack_mounts as stack_mounts
 from .batch import unstack_field as unstack_field
 from .batch import unstack_mounts as unstack_mounts
+from .beam import GradedProbe as GradedProbe
+from .beam import beam_points as beam_points
+from .beam import probe_for_field as probe_for_field
 from .calibrate import Calibration as Calibration
 from .calibrate import calibrate as calibrate
 from .corrections import correction_factors as correction_factors
@@ -74,7 +77,6 @@ from .flags import RecordFlag as RecordFlag
 from .footprint import scan_bounds as scan_bounds
 from .forward import Simulation as Simulation
 from .forward import beam_gradient as beam_gradient
-from .forward import probe_for_field as probe_for_field
 from .forward import simulate as simulate
 from .frames import beam_directions as beam_directions
 from .frames import body_to_cfd_rotation as body_to_cfd_rotation

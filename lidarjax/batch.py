@@ -300,7 +300,7 @@ def rotation_arguments(fname, fields, scan, mounts, heights, u_refs, probe, *,
     first_mount = mount if mount_axis is None else mount[0]
     first_uref = None if u_refs is None else (u_refs if uref_axis is None else u_refs[0])
     _validate(first_field, scan, first_mount, heights, first_uref, probe)
-    probe = probe_for_field(field, scan, heights, probe, caller=fname)
+    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller=fname)
     heights = jnp.atleast_1d(jnp.asarray(heights))
     if not jnp.issubdtype(heights.dtype, jnp.floating):
         heights = heights.astype(first_field.dtype)

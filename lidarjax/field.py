@@ -59,6 +59,13 @@ class AbstractField(eqx.Module):
         the beam is integrated within 0.01 of the probe's transfer function."""
         return None
 
+    def spacing_at(self, points: Float[ArrayLike, "n 3"]) -> np.ndarray | None:
+        """The field's smallest length scale at each of `points` (absolute CFD metres, host):
+        ``(n,)`` field length units, NaN outside the field; ``None`` where it is the same
+        everywhere (`resolution`) or not known on the host. `lidarjax.probe_for_field`
+        chooses each height's nodes from it along the beams' support."""
+        return None
+
     @property
     def time_span(self) -> tuple[Float[Array, ""], Float[Array, ""]] | None:
         """``(first, last)`` time (s) at which the field is defined, or ``None`` where it is
@@ -399,6 +406,30 @@ class GridField(AbstractField):
         steps = [np.diff(np.asarray(a, np.float64)) for a in (self.x_local, self.y_local, self.z_local)]
         steps = np.concatenate([d[d > 0] for d in steps])
         return float(steps.min()) if steps.size else None
+
+    def spacing_at(self, points: Float[ArrayLike, "n 3"]) -> np.ndarray | None:
+        """The grid's spacing at `points` (absolute CFD metres, host) ``(n,)``: the smallest
+        edge of the cell holding each point (the stated `resolution` where it is coarser),
+        NaN outside the grid; ``None`` when the axes are traced, and when the grid is uniform
+        (its `resolution` everywhere). A mesh graded to a wall is fine only near it."""
+        axes = (self.x_local, self.y_local, self.z_local)
+        if not is_concrete(self.origin, self.origin_lo, *axes):
+            return None
+        nodes = [np.asarray(a, np.float64) for a in axes]
+        steps = [np.diff(a) for a in nodes]
+        if all(np.ptp(d) <= 1e-9 * np.max(np.abs(d)) for d in steps):
+            return None
+        p = (np.asarray(points, np.float64).reshape(-1, 3)
+             - np.asarray(self.origin, np.float64) - np.asarray(self.origin_lo, np.float64))
+        out = np.full(p.shape[0], np.inf)
+        inside = np.all(np.isfinite(p), axis=-1)
+        for a, (nd, d) in enumerate(zip(nodes, steps, strict=True)):
+            i = np.clip(np.searchsorted(nd, p[:, a], side="right") - 1, 0, nd.size - 2)
+            out = np.minimum(out, d[i])
+            inside &= (p[:, a] >= nd[0]) & (p[:, a] <= nd[-1])
+        if self.stated_resolution is not None:
+            out = np.maximum(out, self.stated_resolution)
+        return np.where(inside, out, np.nan)
 
     def __init__(self, x, y, z, velocity, *, uniform=None, resolution=None):
         if resolution is not None:
@@ -820,6 +851,10 @@ class SnapshotField(AbstractField):
     @property
     def resolution(self) -> float | None:
         return self.grid.resolution
+
+    def spacing_at(self, points):
+        """The snapshots' grid spacing at `points` (`GridField.spacing_at`)."""
+        return self.grid.spacing_at(points)
 
     @property
     def time_span(self):

@@ -17,57 +17,23 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._precision import difference, is_concrete
 from .angles import horizontal_speed, wind_direction
+from .beam import _cut, beam_los, probe_for_field, profile_geometry
 from .corrections import DEFAULT_RATIO_TOL, correction_factors
 from .field import AbstractField
 from .flags import Flag
 from .frames import (
     cfd_to_north_rotation,
-    lidar_to_cfd_rotation,
     lidar_to_north_rotation,
     rotate,
     tilt_rotation,
 )
 from .mount import Mount
-from .probe import AbstractProbe, PointProbe, _beam_los, _cut, probe_for_ranges
+from .probe import AbstractProbe, PointProbe
 from .scan import ILL_CONDITIONED, Scan, reconstruct
 from .scanning.pattern import ScanPattern
 from .scanning.simulate import ScanResult, simulate_scan
 
 __all__ = ["Simulation", "simulate", "probe_for_field", "beam_gradient"]
-
-
-def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractProbe,
-                    *, caller: str = "probe_for_field") -> AbstractProbe:
-    """The probe `field` is sampled with: `probe` with its quadrature nodes chosen for the
-    field's resolution (`AbstractField.resolution`: a grid's or turbulence box's spacing, a
-    scene's smallest length scale) at the focus ranges of `scan` at `heights` (m), by
-    `lidarjax.probe.probe_for_spacing` (transfer function within 0.01 of the weighting's up
-    to the field's Nyquist wavenumber, fewest nodes).
-
-    The one place `simulate`, `simulate_rotations`, `sensitivity`, `uncertainty`, the
-    response tables built from them and the series choose nodes. An explicit node count
-    (``PulsedProbe(n_nodes=17)``, `with_nodes`) wins, and so do the point probe, a field
-    that states no length scale (uniform, linear and power-law scenes: the probe's default
-    count) and traced inputs. The choice is cached: the same field and heights give the same
-    static node count, so nothing recompiles. Warns (naming `caller`) when no node count up
-    to `lidarjax.probe.MAX_NODES` reaches the tolerance."""
-    if isinstance(probe, PointProbe) or not getattr(probe, "auto_nodes", False):
-        return probe
-    try:
-        resolution = field.resolution
-        if resolution is None:
-            return probe
-        ranges = np.asarray(_focus_ranges(scan, jnp.atleast_1d(jnp.asarray(heights))), np.float64)
-    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-        return probe
-    return probe_for_ranges(probe, resolution, ranges, caller=caller)
-
-
-@eqx.filter_jit
-def _focus_ranges(scan, heights):
-    """Focus ranges ``(h, b)`` of `scan`'s beams at `heights`, as `simulate` computes them (one
-    compiled call: `probe_for_field` runs on every `simulate` call)."""
-    return heights[:, None] / scan.directions()[None, :, 2]
 
 
 class Simulation(eqx.Module):
@@ -235,25 +201,18 @@ def simulate(
     if heights is None:
         raise ValueError("simulate: `heights` (m above the lidar) are needed for a profiling "
                          "scan; only a scanning pattern (lidarjax.ppi, ...) samples its own gates.")
-    probe, heights = _prepared(field, scan, mount, heights, u_ref, probe, "simulate")
+    if probe is None:
+        probe = PointProbe()
+    _validate(field, scan, mount, heights, u_ref, probe)
+    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller="simulate")
+    heights = jnp.atleast_1d(jnp.asarray(heights))
+    if not jnp.issubdtype(heights.dtype, jnp.floating):
+        heights = heights.astype(field.dtype)
     if u_ref is not None:
         u_ref = jnp.asarray(u_ref)
     return _simulate_jit(
         field, scan, mount, heights, u_ref, probe, ratio_tol, point_reference=point_reference
     )
-
-
-def _prepared(field, scan, mount, heights, u_ref, probe, caller):
-    """The checked inputs of `simulate` (and `beam_gradient`): ``(probe, heights)`` with the
-    probe's nodes chosen for the field and the heights a float array."""
-    if probe is None:
-        probe = PointProbe()
-    _validate(field, scan, mount, heights, u_ref, probe)
-    probe = probe_for_field(field, scan, heights, probe, caller=caller)
-    heights = jnp.atleast_1d(jnp.asarray(heights))
-    if not jnp.issubdtype(heights.dtype, jnp.floating):
-        heights = heights.astype(field.dtype)
-    return probe, heights
 
 
 def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
@@ -270,10 +229,15 @@ def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_ref
 
 def _simulate_traced(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
     dtype = field.dtype
-    heights, scan, angles, origin_local, n_cfd, ranges, tilt = _beam_geometry(
-        field, scan, mount, heights)
+    heights = heights.astype(dtype)
     cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
-    los, truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)
+    # The lidar relative to the field's origin, before anything is rounded to `dtype`.
+    origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo, dtype)
+    scan = jax.tree_util.tree_map(cast, scan)
+    angles = jax.tree_util.tree_map(cast, mount)
+    tilt = tilt_rotation(angles.pitch, angles.roll)  # body -> level lidar frame
+    n_cfd, ranges = profile_geometry(scan, mount, heights)  # (b, 3), (h, b): h / cos(cone)
+    los, truncated = beam_los(field, origin_local, n_cfd, ranges, probe)
 
     # NaN (beams outside the field or in a solid) is masked out of every computation below
     # and put back into the results last (the safe_mask pattern): finite results keep
@@ -336,27 +300,6 @@ def _simulate_traced(field, scan, mount, heights, u_ref, probe, ratio_tol, *, po
 _simulate_jit = jax.jit(_simulate, static_argnames=("point_reference",))
 
 
-def _beam_geometry(field, scan, mount, heights):
-    """The beams as `simulate` points them, in the field's dtype: ``(heights, scan, angles,
-    origin_local, n_cfd, ranges, tilt)`` with the lidar relative to the field's origin
-    (rounded to the dtype only after the subtraction), the CFD-frame beam unit vectors
-    ``(b, 3)``, the focus ranges ``(h, b)`` (``h / cos(cone)``, as if level) and the tilt
-    ``T(pitch, roll)``."""
-    dtype = field.dtype
-    heights = heights.astype(dtype)
-    cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
-    # The lidar relative to the field's origin, before anything is rounded to `dtype`.
-    origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo, dtype)
-    scan = jax.tree_util.tree_map(cast, scan)
-    angles = jax.tree_util.tree_map(cast, mount)
-    n_body = scan.directions()  # (b, 3), instrument axes
-    tilt = tilt_rotation(angles.pitch, angles.roll)  # body -> level lidar frame
-    to_cfd = lidar_to_cfd_rotation(angles)
-    n_cfd = rotate(to_cfd @ tilt, n_body)
-    ranges = heights[:, None] / n_body[None, :, 2]  # (h, b): h / cos(cone), as if level
-    return heights, scan, angles, origin_local, n_cfd, ranges, tilt
-
-
 def beam_gradient(
     field: AbstractField,
     scan: Scan,
@@ -389,14 +332,25 @@ def beam_gradient(
     if isinstance(scan, ScanPattern) or not isinstance(scan, Scan):
         raise ValueError("beam_gradient: `scan` must be a profiling lidarjax.Scan "
                          "(lidarjax.windcube_v2(), ...).")
-    probe, heights = _prepared(field, scan, mount, heights, None, probe, "beam_gradient")
+    if probe is None:
+        probe = PointProbe()
+    _validate(field, scan, mount, heights, None, probe)
+    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller="beam_gradient")
+    heights = jnp.atleast_1d(jnp.asarray(heights))
+    if not jnp.issubdtype(heights.dtype, jnp.floating):
+        heights = heights.astype(field.dtype)
     return _beam_gradient_jit(field, scan, mount, heights, probe)
 
 
 @jax.jit
 def _beam_gradient_jit(field, scan, mount, heights, probe):
     with jax.default_matmul_precision("highest"):
-        _, _, angles, origin_local, n_cfd, ranges, _ = _beam_geometry(field, scan, mount, heights)
+        dtype = field.dtype
+        heights = heights.astype(dtype)
+        origin_local = difference(mount.location, mount.location_lo, field.origin,
+                                  field.origin_lo, dtype)
+        angles = jax.tree_util.tree_map(lambda a: jnp.asarray(a).astype(dtype), mount)
+        n_cfd, ranges = profile_geometry(scan, mount, heights)
         q = cfd_to_north_rotation(angles)
         return jnp.einsum("ik,hbkl,jl->hbij", q, gradient_along_beams(
             field, origin_local, n_cfd, ranges, probe), q)
@@ -405,7 +359,8 @@ def _beam_gradient_jit(field, scan, mount, heights, probe):
 def gradient_along_beams(field, origin_local, directions, ranges, probe):
     """``G`` of `beam_gradient` in the CFD frame, ``(h, b, 3, 3)``, for beams from
     `origin_local` (m, relative to the field's origin) along CFD unit `directions`
-    ``(b, 3)`` focused at `ranges` ``(h, b)`` (m), with `probe` (its nodes as given).
+    ``(b, 3)`` focused at `ranges` ``(h, b)`` (m), with `probe` (its nodes as given; a
+    `lidarjax.GradedProbe` pads every height's nodes to one count with weight 0).
     Traceable; `lidarjax.ResponseTable.from_simulations` calls it on a run's geometry."""
 
     def gradient(points):  # (..., 3) -> (..., 3 [velocity], 3 [position])

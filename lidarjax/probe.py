@@ -27,7 +27,7 @@ to its Nyquist wavenumber ``pi / resolution`` (`lidarjax.AbstractField.resolutio
 or turbulence box's spacing, or the coarser scale a `GridField` of a smooth solution is built
 with, a scene's smallest length scale), so `simulate`, the rotations,
 `sensitivity`, `uncertainty`, the tables built from them and the series all take their nodes
-from one place, `lidarjax.probe_for_field` -> `probe_for_spacing`: the fewest nodes whose
+from one place, `lidarjax.probe_for_field` (`lidarjax.beam`) -> `probe_for_spacing`: the fewest nodes whose
 ``|W_q - W|`` stays within `TRANSFER_TOL` (0.01) for every wavenumber up to ``pi /
 resolution`` at every focus range, ``W`` being the transfer function of the weighting the
 simulator integrates (below). A probe built with ``n_nodes=None`` (the default) is refined
@@ -88,7 +88,6 @@ from __future__ import annotations
 
 import abc
 import functools
-import math
 import warnings
 
 import equinox as eqx
@@ -98,11 +97,11 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 from scipy import special
 
-from ._backend import is_accelerator
 from ._precision import default_float, is_concrete
 from ._util import compiled
 
-__all__ = ["AbstractProbe", "PointProbe", "PulsedProbe", "CWProbe", "probe_for_spacing", "probe_transfer"]
+__all__ = ["AbstractProbe", "PointProbe", "PulsedProbe", "CWProbe", "host_nodes", "host_weighting",
+           "probe_for_spacing", "probe_transfer"]
 
 #: Speed of light in vacuum, m/s (for converting pulse durations to lengths).
 SPEED_OF_LIGHT = 299_792_458.0
@@ -664,15 +663,17 @@ def _choose_nodes(key, dx, check, tol, max_nodes) -> tuple[int, float]:
     return best, best_err
 
 
-def probe_for_ranges(probe: AbstractProbe, resolution, ranges, *, caller: str = "probe_for_ranges"):
+def probe_for_ranges(probe: AbstractProbe, resolution, ranges, *, caller: str = "probe_for_ranges",
+                     tol: float = TRANSFER_TOL):
     """The probe a field of `resolution` (field length units; ``None``: it states none) is
     sampled with at focus `ranges`: `probe` refined by `probe_for_spacing` when its node
     count is automatic (built with ``n_nodes=None``), as given otherwise (an explicit count
-    wins, and so do the point probe and traced inputs). Warns (naming `caller`) when no
-    node count up to `MAX_NODES` reaches the tolerance."""
+    wins, and so do the point probe and traced inputs). `tol`: the largest ``|W_q - W|``
+    accepted (`TRANSFER_TOL`). Warns (naming `caller`) when no node count up to
+    `MAX_NODES` reaches the tolerance."""
     if isinstance(probe, PointProbe) or not getattr(probe, "auto_nodes", False) or resolution is None:
         return probe
-    refined, err, tol = _refine_probe(probe, resolution, ranges)
+    refined, err, tol = _refine_probe(probe, resolution, ranges, tol)
     if err > tol:
         warnings.warn(
             f"{caller}: {type(probe).__name__} cannot integrate its weighting over the field's "
@@ -681,6 +682,33 @@ def probe_for_ranges(probe: AbstractProbe, resolution, ranges, *, caller: str = 
             f"even with {refined.n_nodes} nodes). Give a coarser resolution or an explicit "
             f"n_nodes.", stacklevel=3)
     return refined
+
+
+def host_nodes(probe: AbstractProbe, focus_range) -> tuple[np.ndarray, np.ndarray]:
+    """The quadrature of `probe` on the host (float64 numpy, concrete numbers): ``(offsets,
+    weights)`` ``(..., q)`` for focus ranges ``(...)``, as `AbstractProbe.nodes` computes
+    them in the working dtype. `PulsedProbe` and `CWProbe`."""
+    if not hasattr(probe, "_host_nodes"):
+        raise ValueError(f"host_nodes: no host form for {type(probe).__name__}.")
+    return probe._host_nodes(np.asarray(focus_range, np.float64))
+
+
+def host_weighting(probe: AbstractProbe, offsets, focus_range) -> tuple[np.ndarray, np.ndarray]:
+    """The weighting of `probe` on the host (float64 numpy, concrete numbers): its density
+    ``phi`` (1 / length) at `offsets` from the focus (``(..., n)``, length units) for focus
+    ranges ``(...)``, and the half-width of its truncated support cut at the lidar,
+    ``min(support, focus_range)`` ``(...)``. `PulsedProbe` and `CWProbe`."""
+    r = np.asarray(focus_range, np.float64)
+    o = np.asarray(offsets, np.float64)
+    if isinstance(probe, PulsedProbe):
+        rp, dp = probe._host_rp_gate()
+        half = np.minimum(dp / 2 + float(probe.truncation) * rp, r)
+        return _pulsed_weight(special.erf, o, rp, dp), half
+    if isinstance(probe, CWProbe):
+        lam, a = float(probe.wavelength), float(probe.aperture_radius)
+        g = (lam * r**2 / (np.pi * a**2))[..., None]
+        return g / (np.pi * (o**2 + g**2)), r
+    raise ValueError(f"host_weighting: no host form for {type(probe).__name__}.")
 
 
 def _cut_lorentzian_transfer(g, r, kappa):
@@ -786,224 +814,3 @@ def _legendre(n):
 @eqx.filter_jit
 def _nodes(probe, r):
     return probe.nodes(jnp.asarray(r))
-
-
-# ---------------------------------------------------------------------------------------
-# the quadrature along beams: simulate, simulate_series and the scanning lidars share it
-
-
-def _beam_los(field, origin_local, directions, ranges, probe, los=None):
-    """LOS ``(h, b)`` for focus ranges ``(h, b)`` along CFD beam `directions` ``(b, 3)``,
-    and ``(h, b)`` booleans: the probe's symmetric cut at the lidar dropped more than its
-    ``tail`` of weight (None for the point probe, which compiles no quadrature at all).
-
-    A beam is NaN when its focus (point probe) or any quadrature node ahead of the lidar is
-    outside the field or in a solid. NaN node values never meet arithmetic on the inputs
-    (they are masked before the weighted sum and put back last), so the gradients of the
-    finite results, and of a loss that masks the NaN ones, stay finite.
-
-    `los`: optional ``los(points, directions)`` used instead of ``field.los_local`` (a time
-    series samples prepared fixed points at many times: its result may carry leading time
-    axes, broadcast against ``points.shape[:-1]``)."""
-    los_fn = field.los_local if los is None else los
-    if isinstance(probe, PointProbe):
-        pts = origin_local + ranges[..., None] * directions
-        return los_fn(pts, directions), None
-    offsets, weights = probe.nodes(ranges)  # (h, b, q) or broadcastable
-    offsets = jnp.broadcast_to(offsets.astype(ranges.dtype), ranges.shape + offsets.shape[-1:])
-    weights = jnp.broadcast_to(weights.astype(ranges.dtype), offsets.shape)
-    node_ranges = ranges[..., None] + offsets
-    pts = origin_local + node_ranges[..., None] * directions[:, None, :]
-    los_q = los_fn(pts, directions[:, None, :])
-    # no light returns from behind the lidar: cut the probe symmetrically at the lidar
-    # (|offset| < range, so it stays centred on the focus) and renormalise
-    ahead, kept, total = _cut(offsets, weights, ranges)
-    los = _probe_mean(los_q, jnp.broadcast_to(kept, los_q.shape), jnp.broadcast_to(ahead, los_q.shape))
-    if offsets.shape[-1] % 2 == 0:
-        # Symmetric nodes of an odd count include the focus (offset 0), which is always
-        # kept. An even count has none: when the cut keeps no node (focus range below the
-        # innermost offset), the probe's limit is the focus itself.
-        focus = los_fn(origin_local + ranges[..., None] * directions, directions)
-        los = jnp.where(total <= 0, focus, los)
-    return los, _truncated(probe, total)
-
-
-def _cut(offsets, weights, ranges):
-    """The probe's symmetric cut at the lidar for nodes at `offsets` ``(..., q)`` around
-    focus ranges ``(...)``: ``(ahead, kept weights, kept total)``, nodes ahead of the lidar
-    (``|offset| < range``) and their weights."""
-    ahead = jnp.abs(offsets) < ranges[..., None]
-    kept = jnp.where(ahead, weights, 0)
-    return ahead, kept, jnp.sum(kept, axis=-1)
-
-
-def _truncated(probe, total):
-    """The cut dropped more than the probe's `tail` of its weighting (`total`: the kept
-    weight of the probe's own rule)."""
-    return (1 - total) > jnp.asarray(getattr(probe, "tail", 0.0)).astype(total.dtype)
-
-
-def shared_gate_rule(probe, ranges) -> tuple[int, int] | None:
-    """Host choice of the shared-node rule for equally spaced range gates (`_gates_los`):
-    ``(m, J)`` with ``m`` nodes per gate spacing and ``2 J + 1`` nodes per gate, or ``None``
-    where every gate keeps its own nodes (`_beam_los`).
-
-    The rule samples each beam once, every ``h = spacing / m`` from the first gate, and
-    weights node ``j`` of a gate (``j = -J..J``, offset ``j h`` from its centre) by
-    ``phi(j h)``; neighbouring gates share their nodes. ``h`` is at most the spacing of the
-    probe's own rule (``2 support / n_nodes``, chosen for the field's resolution), so its
-    error, the weighting's transfer function at the alias ``2 pi / h - k``, stays within the
-    same tolerance, and ``J h`` covers the support. It applies to a `PulsedProbe` (a
-    weighting independent of range) at 2 or more gates equally spaced to 1e-9 (host numbers),
-    when it samples fewer points than per-gate nodes do."""
-    if not isinstance(probe, PulsedProbe) or not is_concrete(probe, ranges):
-        return None
-    r = np.asarray(ranges, np.float64).reshape(-1)
-    if r.size < 2 or not np.all(np.isfinite(r)):
-        return None
-    d = np.diff(r)
-    if not (r[0] >= 0 and d[0] > 0 and np.allclose(d, d[0], rtol=1e-9, atol=0.0)):
-        return None
-    support = float(probe.support())
-    m = max(1, math.ceil(d[0] * probe.n_nodes / (2 * support) - 1e-9))
-    half = int(math.floor(support * m / d[0] + 1e-9))
-    if half < 1 or m >= 2 * half + 1:
-        return None
-    return m, half
-
-
-def _host_gate_nodes(probe, ranges, rule):
-    """Host ``(offsets, weights)`` ``(g, q)`` of every gate at `ranges` ``(g,)`` as the
-    simulator integrates them: the shared-node `rule` ``(m, J)`` (`shared_gate_rule`) or,
-    with ``None``, the probe's own nodes per gate. Nodes the cut at the lidar drops have
-    weight 0; each gate's weights sum to 1."""
-    r = np.asarray(ranges, np.float64).reshape(-1)
-    if rule is None:
-        offsets, weights = probe._host_nodes(r)
-    else:
-        m, half = rule
-        h = (r[1] - r[0]) / m
-        offsets = np.broadcast_to((np.arange(2 * half + 1) - half) * h, (r.size, 2 * half + 1))
-        weights = probe._host_weight(offsets)
-    weights = np.where(np.abs(offsets) < r[:, None], weights, 0.0)
-    total = weights.sum(axis=-1, keepdims=True)
-    return np.array(offsets), weights / np.where(total > 0, total, 1.0)
-
-
-def _gates_los(field, origin_local, directions, ranges, probe, rule, los=None, windows=None):
-    """`_beam_los` for equally spaced gates ``(g,)`` with the shared-node rule ``(m, J)`` of
-    `shared_gate_rule`: LOS ``(g, b)`` and the truncation flags ``(g, 1)``. `los` (as in
-    `_beam_los`) is called with points ``(b, L, 3)`` and directions ``(b, 1, 3)``: a leading
-    time axis of its result broadcasts against ``(b, L)``.
-
-    The beam is sampled at ``L = (g - 1) m + 2 J + 1`` ranges ``r_0 + (l - J) h``; gate ``i``
-    takes nodes ``i m .. i m + 2 J``. The lidar cut, NaN and derivative rules are those of
-    `_beam_los` (nodes ``|j h| >= r_i`` are dropped, the weights renormalised; the flag
-    compares the kept weight of the weighting itself with `tail`). Every number stays
-    dynamic: the gates' first range and spacing, and the probe's pulse and gate length."""
-    m, half = rule
-    los_fn = field.los_local if los is None else los
-    g = ranges.shape[0]
-    dtype = ranges.dtype
-    h = (ranges[1] - ranges[0]) / m
-    n_fine = (g - 1) * m + 2 * half + 1
-    fine = ranges[0] + (jnp.arange(n_fine, dtype=dtype) - half) * h  # (L,)
-    # beam-major (b, L): consecutive samples lie along one beam, so the field's cells they
-    # read are neighbours in memory
-    pts = origin_local + fine[None, :, None] * directions[:, None, :]  # (b, L, 3)
-    fine_los = los_fn(pts, directions[:, None, :])  # (..., b, L)
-    # each gate's window. On a CPU, a strided convolution (`_window_mean`): the compiler
-    # fuses the field's interpolation into an index gather of the windows (or into strided
-    # slices), computing every sample once per gate that holds it, 2 J / m times, in an
-    # order that leaps between beams; a convolution reads the samples once, computed beam by
-    # beam (the 10-minute PPI series of benchmarks/scanning.py 3x faster). The near gates,
-    # whose nodes the cut can drop, sample their own nodes, so the convolution stays the
-    # samples' one reader. On an accelerator, one index gather (as measured on the H100).
-    offsets = (jnp.arange(2 * half + 1, dtype=dtype) - half) * h  # (q,)
-    phi = probe.weight(offsets).astype(dtype)  # (q,)
-    ahead, kept, _ = _cut(offsets, phi, ranges)  # (g, q) each
-    if windows is None:
-        windows = "gather" if is_accelerator() else "convolution"
-    # gates beyond ``J h`` keep every node (``r_i >= i m h``, so gates ``i > J / m``); only
-    # the first ``J // m + 1`` can lose nodes to the cut at the lidar
-    k0 = g if windows == "gather" else min(g, half // m + 1)
-    if k0 == g:
-        window = np.arange(g)[:, None] * m + np.arange(2 * half + 1)[None, :]  # (g, q)
-        los_q = fine_los[..., window]  # (..., b, g, q)
-    else:  # the near gates sample their own nodes: the convolution is the samples' one reader
-        near = (ranges[:k0, None] + offsets).reshape(-1)  # (k0 q,)
-        los_q = los_fn(origin_local + near[None, :, None] * directions[:, None, :],
-                       directions[:, None, :])
-        los_q = los_q.reshape(los_q.shape[:-1] + (k0, 2 * half + 1))  # (..., b, k0, q)
-    shape = los_q.shape
-    los = _probe_mean(los_q, jnp.broadcast_to(kept[:k0], shape), jnp.broadcast_to(ahead[:k0], shape))
-    if k0 < g:
-        los = jnp.concatenate([los, _window_mean(fine_los, phi, m)[..., k0:]], axis=-1)
-    los = jnp.swapaxes(los, -1, -2)  # (..., g, b)
-    # the flag: the weighting's own kept weight at each gate, as `_beam_los` computes it
-    off_p, w_p = probe.nodes(ranges)
-    total = _cut(off_p.astype(dtype), w_p.astype(dtype), ranges)[2]
-    return los, _truncated(probe, total)[:, None]
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
-def _window_mean(samples, phi, m: int):
-    """Weighted means of equal windows along the last axis: ``(..., L)`` samples ->
-    ``(..., g)``, ``g = (L - q) / m + 1``, window ``i`` being samples ``i m .. i m + q - 1``
-    weighted by `phi` ``(q,)``: ``sum_j phi_j s[i m + j] / sum_j phi_j``. NaN where a sample
-    of the window is NaN (as `_probe_mean` with every node kept).
-
-    One strided convolution, so the samples are an operand the compiler computes once
-    (it copies cheap producers into the consumers of an index gather). The derivative
-    (below) zeroes NaN samples before they meet a tangent, so a loss that masks NaN gates
-    gets finite gradients for the weights, as `_probe_mean`'s does."""
-    return _correlate(samples, phi, m) / jnp.sum(phi)
-
-
-def _correlate(samples, phi, m):
-    lead = samples.shape[:-1]
-    out = jax.lax.conv_general_dilated(samples.reshape(-1, 1, samples.shape[-1]),
-                                       phi.astype(samples.dtype)[None, None, :], (m,), "VALID",
-                                       precision=jax.lax.Precision.HIGHEST)
-    return out.reshape(lead + out.shape[-1:])
-
-
-@_window_mean.defjvp
-def _window_mean_jvp(m, primals, tangents):
-    samples, phi = primals
-    d_samples, d_phi = tangents
-    mean = _window_mean(samples, phi, m)
-    bad = jnp.isnan(samples)
-    safe = jnp.where(bad, 0, samples)
-    d_mean = (_correlate(jnp.where(bad, 0, d_samples), phi, m) + _correlate(safe, d_phi, m)
-              - jnp.where(jnp.isnan(mean), 0, mean) * jnp.sum(d_phi)) / jnp.sum(phi)
-    return mean, jnp.where(jnp.isnan(mean), 0, d_mean)
-
-
-@jax.custom_jvp
-def _probe_mean(los_q, kept, ahead):
-    """``sum(kept * los_q) / sum(kept)`` over the nodes ahead of the lidar (last axis), 0 when
-    none is kept; NaN when a node ahead is NaN (outside the field or in a solid).
-
-    NaN node values flow through this plain form, which keeps the field's gather fused with
-    the weighted sum (masking them first costs 5-7x in throughput). The derivative (below) is
-    written out with the NaN beams masked, so `0 * NaN` cannot reach the weights (probe
-    parameters, heights) even for a loss that masks the NaN LOS out; it is zero there."""
-    total = jnp.sum(kept, axis=-1)
-    return jnp.sum(jnp.where(ahead, kept * los_q, 0), axis=-1) / jnp.where(total > 0, total, 1)
-
-
-@_probe_mean.defjvp
-def _probe_mean_jvp(primals, tangents):
-    los_q, kept, ahead = primals
-    d_los, d_kept, _ = tangents
-    mean = _probe_mean(los_q, kept, ahead)
-    ok = jnp.isfinite(mean)
-    use = ahead & ok[..., None]
-    total = jnp.sum(kept, axis=-1)
-    # NaN node values are zeroed before they multiply a tangent: the transpose (reverse mode)
-    # would otherwise multiply a zero cotangent by them (range-dependent weights)
-    los_safe = jnp.where(use, los_q, 0)
-    d_mean = jnp.sum(jnp.where(use, kept * d_los + d_kept * los_safe, 0), axis=-1)
-    d_mean = d_mean - jnp.where(ok, mean, 0) * jnp.sum(d_kept, axis=-1)
-    return mean, d_mean / jnp.where(total > 0, total, 1)

@@ -671,7 +671,7 @@ class ResponseTable(eqx.Module):
                                           np.float64))
                     p = PointProbe() if probe is None else probe
                     if scan is not None:
-                        p = probe_for_field(f, scan, heights[i], p,
+                        p = probe_for_field(f, scan, heights[i], p, mount=m,
                                             caller="ResponseTable.from_simulations")
                     to_f = lambda a, f=f: jnp.asarray(np.asarray(a).astype(f.dtype))  # noqa: E731
                     grad.append(np.asarray(_gradient_along(

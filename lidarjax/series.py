@@ -9,7 +9,7 @@ constant series) with an optional platform `lidarjax.motion` motion:
 1. LOS times ``(m, h, b)`` from the schedule (``m`` cycles, or rotations for sequential
    heights); each LOS is the probe-weighted projection of the field *at its own time* along
    the beam of the mount *at that time* (the forward model's probe quadrature,
-   `lidarjax.probe._beam_los`, on the field frozen at that instant), minus the
+   `lidarjax.beam.beam_los`, on the field frozen at that instant), minus the
    lidar's own velocity along the beam;
 2. reconstructions as the instrument builds them (`Schedule.update`): Windcube, after each
    new LOS from the latest LOS of every beam (so consecutive vectors share 4 of 5 LOS and
@@ -45,11 +45,11 @@ from ._backend import CPU_BATCH, default_batch
 from ._deprecated import deprecated_getattr
 from ._precision import HIGHEST, difference
 from .angles import horizontal_speed, wind_direction
+from .beam import beam_los, probe_for_field, profile_geometry
 from .field import AbstractField, FieldSequence
 from .flags import Flag
-from .forward import _validate, probe_for_field
+from .forward import _validate
 from .frames import (
-    body_to_cfd_rotation,
     cfd_to_north_rotation,
     lidar_to_cfd_rotation,
     lidar_to_north_rotation,
@@ -58,7 +58,7 @@ from .frames import (
 )
 from .motion import AbstractMotion
 from .mount import Mount
-from .probe import AbstractProbe, PointProbe, _beam_los
+from .probe import AbstractProbe, PointProbe
 from .scan import Scan, reconstruct
 from .scanning.pattern import ScanPattern
 from .scanning.simulate import simulate_scan_series
@@ -113,7 +113,7 @@ class Series(eqx.Module):
 
 class _AtTime(AbstractField):
     """A field frozen at given times: lets the forward model's probe quadrature
-    (`lidarjax.probe._beam_los`) sample a time-dependent field unchanged. `time` is a
+    (`lidarjax.beam.beam_los`) sample a time-dependent field unchanged. `time` is a
     scalar or one time per beam focus ``(h, b)``; the quadrature's extra node axis (points
     ``(h, b, q, 3)``) shares its focus' time."""
 
@@ -296,14 +296,6 @@ def _mount_at(mount: Mount, attitude):
                        (mount.gamma + yaw, mount.pitch + pitch, mount.roll + roll))
 
 
-def _geometry(scan: Scan, mount: Mount):
-    """Beam unit vectors ``(b, 3)`` in the CFD frame (tilt included) and the focus range per
-    metre of height ``(b,)`` (``1 / cos(cone)`` in the body frame: the instrument assumes it is
-    level), as in `lidarjax.simulate`."""
-    n_body = scan.directions()
-    return rotate(body_to_cfd_rotation(mount), n_body), 1.0 / n_body[:, 2]
-
-
 def _to_north(scan: Scan, mount: Mount, v_lidar):
     """Body-frame reconstruction to the north frame: the software north rotation, after the
     tilt when the scan compensates it (as `lidarjax.simulate`)."""
@@ -329,19 +321,18 @@ def _series_los(field, scan, mount_d, origin_local, heights, t_los, probe, motio
         mt = _mount_at(mount_d, att.astype(dtype))
         offset = rotate(to_cfd_rest, off.astype(dtype))
         v_lidar = rotate(to_cfd_rest, vel.astype(dtype))
-        n_cfd, per_height = _geometry(scan, mt)
+        n_cfd, rng = profile_geometry(scan, mt, z.reshape(1))
         n = n_cfd[j]
-        rng = (z * per_height[j]).reshape(1, 1)
+        rng = rng[:, j][:, None]  # (1, 1)
         frozen = _AtTime(field.origin, field.origin_lo, field, t)
-        los, _ = _beam_los(frozen, origin_local + offset, n[None, :], rng, probe)
+        los, _ = beam_los(frozen, origin_local + offset, n[None, :], rng, probe)
         return los[0, 0] - jnp.dot(n, v_lidar, precision=HIGHEST)
 
     if motion is not None:
         return jax.vmap(one)(t_los.reshape(-1), beam.reshape(-1),
                              hgt.reshape(-1)).reshape(m, h, b)
     # a fixed lidar: one geometry, every cycle's (h, b) LOS at their own times at once
-    n_cfd, per_height = _geometry(scan, mount_d)
-    ranges = heights[:, None] * per_height[None, :]
+    n_cfd, ranges = profile_geometry(scan, mount_d, heights)
 
     # The sample points are the same at every time: the field is prepared for them once
     # (`AbstractField.time_sampler`: frozen turbulence builds one line along the wind
@@ -352,7 +343,7 @@ def _series_los(field, scan, mount_d, origin_local, heights, t_los, probe, motio
         t = t_los[..., None] if pts.ndim == 4 else t_los  # (m, h, b[, 1])
         return field.time_sampler(pts, dirs, n_times=n_times)(t)
 
-    return _beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)[0]
+    return beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)[0]
 
 
 def _series_points(field, mount_d, origin_local, heights, t_pt, repeat=1):

@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._util import atomic_path, import_optional
+from ..beam import pattern_geometry
 from ..io import read_hpl, read_windcube_scan
 from ..io.hpl import INTENSITY_THRESHOLD, HaloScan
 from ..probe import CWProbe, PointProbe
@@ -37,7 +38,6 @@ from ..scanning import (
     stare,
     vad,
 )
-from ..scanning.simulate import host_sub_rays
 from ._common import SCAN_CHOICES, finite_float, positive_float, positive_int
 
 #: The scanning presets (`lidarjax.scanning`).
@@ -242,7 +242,7 @@ def scan_region(pattern, mounts, probe=None) -> tuple[np.ndarray, np.ndarray]:
         mounts = [mounts]
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for mount in mounts:
-        loc, n = host_sub_rays(pattern, mount)  # (3,), (B, 3)
+        loc, n = pattern_geometry(pattern, mount)  # (3,), (B, 3)
         pts = np.concatenate([(loc + d[:, None, None] * n[None]).reshape(-1, 3)
                               for d in (near, far)])
         lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))

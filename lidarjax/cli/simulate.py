@@ -121,9 +121,10 @@ def run(args) -> int:
         mount = settings_mount(settings, [b], pitch=args.pitch, roll=args.roll)[0]
 
         def points(grid):
-            used = probe_for_field(grid, scan, heights, probe, caller="simulate") if probe else None
+            used = (probe_for_field(grid, scan, heights, probe, mount=mount, caller="simulate")
+                    if probe else None)
             if used is not None:
-                nodes[b] = used.n_nodes
+                nodes[b] = getattr(used, "node_counts", (used.n_nodes,))
             return simulate_points(scan, mount, heights, used)
 
         field = load_field(paths[b], region=region, exact_at=points)
@@ -136,9 +137,12 @@ def run(args) -> int:
                        sources={b: str(p) for b, p in paths.items()},
                        settings_file=args.settings, pitch=args.pitch, roll=args.roll, log=print)
     if nodes and isinstance(probe, PulsedProbe):  # the pulsed rule depends on the count only
-        counts = " ".join(sorted({str(n) for n in nodes.values()}, key=int))
-        print(f"probe nodes per beam: {counts} (chosen for the CFD field's resolution; "
-              f"`lidarjax monitor-points --probe pulsed --probe-nodes N` writes the same nodes)")
+        counts = " ".join(sorted({str(n) for c in nodes.values() for n in c}, key=int))
+        graded = any(len(set(c)) > 1 for c in nodes.values())
+        print(f"probe nodes per beam: {counts} (chosen for the CFD field's resolution"
+              + (" along each height's beams; " if graded else "; ")
+              + "`lidarjax monitor-points --probe pulsed --probe-nodes N` writes the same nodes"
+              + (" for the heights with N)" if graded else ")"))
     why = explain_nans(sims, fields, settings, paths)
     if why:
         print(f"lidarjax simulate: warning: {why}", file=sys.stderr)

@@ -16,17 +16,13 @@ from __future__ import annotations
 
 from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from ..beam import simulate_points
 from ..field import AbstractField, GridField, IndexedPoints, PointIndex
-from ..frames import lidar_to_cfd_rotation, rotate, tilt_rotation
-from ..mount import Mount
-from ..probe import AbstractProbe, PointProbe
-from ..scan import Scan
 from ._cells import CellPointSampler
 
 __all__ = ["CellPointField", "cellpoint_field", "simulate_points"]
@@ -109,6 +105,10 @@ class CellPointField(IndexedPoints, AbstractField):
         """The grid's resolution (m): probe nodes are chosen for it, as for the grid alone."""
         return self.grid.resolution
 
+    def spacing_at(self, points):
+        """The grid's spacing at `points` (`GridField.spacing_at`)."""
+        return self.grid.spacing_at(points)
+
     @property
     def nbytes(self) -> int:
         """Bytes held by the grid and the prepared tetrahedra."""
@@ -152,8 +152,8 @@ def cellpoint_field(
     - `grid`: the `GridField` resampled from it (`resample_openfoam`), answering every other
       query.
     - `points`: ``(n, 3)`` absolute CFD metres: the points `simulate` will sample, e.g.
-      ``simulate_points(scan, mount, heights, lidarjax.probe_for_field(grid, scan, heights,
-      probe))`` (several mounts: their points stacked).
+      ``lidarjax.beam_points(grid, scan, mount, heights, probe)`` (several mounts: their
+      points stacked).
     - `tolerance`: see `CellPointField`.
 
     **Returns:** a `CellPointField`.
@@ -174,55 +174,3 @@ def cellpoint_field(
     if found.any():
         vertices[found], values[found] = sampler.tet_vertices(tets[found])
     return CellPointField(grid, pts, vertices, values, tolerance=tolerance)
-
-
-def simulate_points(
-    scan: Scan,
-    mount: Mount,
-    heights: Float[ArrayLike, " h"],
-    probe: AbstractProbe | None = None,
-) -> Float[np.ndarray, "n 3"]:
-    """Every point `lidarjax.simulate` samples for one mount, absolute CFD metres `(n, 3)`
-    (float64 on the host): each beam's quadrature nodes (those behind the lidar included:
-    `simulate` samples them before it drops their weight), the focus of every beam (the
-    probe's limit when a cut leaves an even node count none), and the point reference ``h``
-    above the lidar.
-
-    **Arguments:** `scan`, `mount` (one, not a batch), `heights` (m above the lidar) and
-    `probe` exactly as given to `simulate` *after* its node choice: pass
-    ``lidarjax.probe_for_field(field, scan, heights, probe)`` for a probe with automatic
-    nodes. The geometry is `simulate`'s (beam directions with the mount's tilt, focus
-    ranges ``h / cos(cone)``, the probe's `nodes`), computed in one compiled call in the
-    working dtype, so a `CellPointField` prepared at these points matches `simulate`'s own
-    queries to rounding (`lidarjax.monitor_points` lists the same points, named, without the
-    nodes behind the lidar).
-    """
-    if not isinstance(scan, Scan) or not isinstance(mount, Mount) or mount.batch_shape:
-        raise ValueError("simulate_points: needs a lidarjax.Scan and one lidarjax.Mount (not a batch)")
-    probe = PointProbe() if probe is None else probe
-    h = np.atleast_1d(np.asarray(heights, np.float64))
-    if h.ndim != 1 or h.size == 0 or not np.all(np.isfinite(h)) or np.any(h <= 0):
-        raise ValueError(f"simulate_points: heights must be positive metres, got {h.tolist()}")
-    local = np.asarray(_local_points(scan, mount, jnp.asarray(h), probe), np.float64)
-    loc = np.asarray(mount.location, np.float64) + np.asarray(mount.location_lo, np.float64)
-    return loc + local.reshape(-1, 3)
-
-
-@eqx.filter_jit
-def _local_points(scan, mount, heights, probe):
-    """The points of `simulate_points` relative to the lidar, as `lidarjax.forward` forms them."""
-    with jax.default_matmul_precision("highest"):
-        dtype = heights.dtype
-        cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
-        scan = jax.tree_util.tree_map(cast, scan)
-        angles = jax.tree_util.tree_map(cast, mount)
-        n_body = scan.directions()
-        n_cfd = rotate(lidar_to_cfd_rotation(angles) @ tilt_rotation(angles.pitch, angles.roll), n_body)
-        ranges = heights[:, None] / n_body[None, :, 2]  # (h, b)
-        out = [ranges[..., None] * n_cfd, heights[:, None] * jnp.array([0.0, 0.0, 1.0], dtype)]
-        if not isinstance(probe, PointProbe):
-            offsets, _ = probe.nodes(ranges)
-            offsets = jnp.broadcast_to(offsets.astype(dtype), ranges.shape + offsets.shape[-1:])
-            node_ranges = ranges[..., None] + offsets
-            out.append(node_ranges[..., None] * n_cfd[:, None, :])
-        return jnp.concatenate([o.reshape(-1, 3) for o in out])

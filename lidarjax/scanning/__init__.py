@@ -4,15 +4,17 @@ time, and the reconstructions they feed (VAD/DBS profiles, dual-Doppler vectors)
 
 - `pattern`: `ScanPattern`, one repetition of a scan (rays, timing, gates).
 - `presets`: `ppi`, `rhi`, `stare`, `vad`, `spinner_rosette`, `instrument_probe`.
-- `simulate`: `simulate_scan` (steady), `simulate_scan_series` (through time), `ScanResult`,
-  `gate_nodes` (the range-weighting quadrature of every gate), `scan_points` (every point
-  sampled, for a mesh's exact interpolation).
+- `simulate`: `simulate_scan` (steady), `simulate_scan_series` (through time), `ScanResult`;
+  `gate_nodes` (the range-weighting quadrature of every gate) and `scan_points` (every point
+  sampled, for a mesh's exact interpolation) are `lidarjax.beam`'s, re-exported here.
 - `profiles`: `vad_fit`, the per-gate least-squares sine fit at any elevation.
 - `dual`: `dual_doppler`, vectors where two lidars' beams cross.
 
 See ``docs/scanning.md``.
 """
 
+from ..beam import gate_nodes as gate_nodes
+from ..beam import scan_points as scan_points
 from .dual import DUAL_ILL_CONDITIONED as DUAL_ILL_CONDITIONED
 from .dual import CrossingGeometry as CrossingGeometry
 from .dual import DualDoppler as DualDoppler
@@ -34,7 +36,5 @@ from .presets import vad as vad
 from .profiles import VadProfile as VadProfile
 from .profiles import vad_fit as vad_fit
 from .simulate import ScanResult as ScanResult
-from .simulate import gate_nodes as gate_nodes
-from .simulate import scan_points as scan_points
 from .simulate import simulate_scan as simulate_scan
 from .simulate import simulate_scan_series as simulate_scan_series

@@ -31,11 +31,12 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._precision import difference, is_concrete, safe_sqrt
+from ..beam import beam_los
 from ..field import AbstractField
 from ..flags import InverseFlag
 from ..frames import body_to_cfd_rotation, rotate
 from ..mount import Mount
-from ..probe import AbstractProbe, PointProbe, _beam_los, probe_for_ranges
+from ..probe import AbstractProbe, PointProbe, probe_for_ranges
 
 __all__ = ["DualDoppler", "CrossingGeometry", "crossing_geometry", "dual_doppler",
            "simulate_dual_doppler", "DUAL_ILL_CONDITIONED"]
@@ -181,7 +182,7 @@ def _simulate_dual(field, mount_a, mount_b, points, probe, w):
     for mount, n, rng in ((mount_a, geo.direction_a, geo.range_a),
                           (mount_b, geo.direction_b, geo.range_b)):
         origin = difference(mount.location, mount.location_lo, field.origin, field.origin_lo, dtype)
-        los.append(_beam_los(field, origin, n, rng[None, :], probe)[0][0])
+        los.append(beam_los(field, origin, n, rng[None, :], probe)[0][0])
     return _dual(los[0], los[1], geo.direction_a, geo.direction_b, w), geo
 
 

@@ -7,7 +7,8 @@ time. Both use the profilers' machinery unchanged: the mount's frame chain
 (`lidarjax.body_to_cfd_rotation`: location, beta/gamma/psi, pitch and roll, the nacelle's
 ``pitch = -90``), the probe quadrature of `lidarjax.simulate` (a `lidarjax.PulsedProbe` per
 gate: each gate centre is a focus range, cut at the lidar), probe nodes chosen for the
-field's resolution (`lidarjax.probe.probe_for_ranges`), NaN plus a flag outside the field.
+field's resolution (`lidarjax.beam.pattern_probe`), NaN plus a flag outside the field.
+The beams' geometry, nodes, points and LOS are `lidarjax.beam`'s.
 
 A ray is the mean of its `ScanPattern.n_sub` sub-rays (the arc swept during accumulation; see
 `lidarjax.scanning.pattern`). A batched `lidarjax.Mount` (``(s, 3)`` locations) adds a leading
@@ -23,24 +24,16 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._precision import difference, is_concrete
-from .._util import ArrayMemo
+from ..beam import beam_los, gates_los, pattern_probe
 from ..field import AbstractField, DirectSampler
 from ..flags import Flag
 from ..frames import body_to_cfd_rotation, lidar_to_cfd_rotation, rotate
 from ..motion import AbstractMotion
 from ..mount import Mount
-from ..probe import (
-    AbstractProbe,
-    PointProbe,
-    _beam_los,
-    _gates_los,
-    _host_gate_nodes,
-    probe_for_ranges,
-    shared_gate_rule,
-)
+from ..probe import AbstractProbe, PointProbe
 from .pattern import ScanPattern
 
-__all__ = ["ScanResult", "gate_nodes", "scan_points", "simulate_scan", "simulate_scan_series"]
+__all__ = ["ScanResult", "simulate_scan", "simulate_scan_series"]
 
 
 class ScanResult(eqx.Module):
@@ -89,87 +82,6 @@ def _scalar(value, dtype):
     return jnp.asarray(value).astype(dtype)
 
 
-_CHOSEN = ArrayMemo()  # the nodes chosen for a (field, ranges, probe), by their arrays' identity
-
-
-def _refine(field, pattern, probe, caller, shared=True):
-    """The probe's nodes chosen for the field's resolution, and the shared-node rule of the
-    gates (`lidarjax.probe.shared_gate_rule`; None: per-gate nodes, always without
-    `shared`), host choices memoised on the inputs' arrays."""
-    if isinstance(probe, PointProbe) or not is_concrete(pattern.ranges, probe):
-        return probe, None
-
-    def choose():
-        chosen = probe
-        if getattr(probe, "auto_nodes", False):
-            try:
-                resolution = field.resolution
-            except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-                resolution = None
-            chosen = probe_for_ranges(probe, resolution, np.asarray(pattern.ranges, np.float64),
-                                      caller=caller)
-        return chosen, shared_gate_rule(chosen, pattern.ranges)
-
-    chosen, rule = _CHOSEN((field, pattern.ranges, probe), choose)
-    return chosen, rule if shared else None
-
-
-def gate_nodes(field: AbstractField, pattern: ScanPattern, probe: AbstractProbe, *,
-               shared_nodes: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """The range-weighting quadrature `simulate_scan` integrates every gate of `pattern`
-    with in `field`: host ``(offsets, weights)``, each ``(g, q)``, offsets in m from the
-    gate centre along the beam (positive away from the lidar), weights summing to 1 per gate
-    (0 for nodes the cut at the lidar drops).
-
-    A `lidarjax.PulsedProbe` on equally spaced gates shares its nodes between neighbouring
-    gates (`shared_nodes`, the default): each beam is sampled once every ``h`` (at most the
-    spacing the probe's own rule needs for the field's resolution, and a whole fraction of
-    the gate spacing) and a gate weights the samples within its support by the weighting
-    ``phi``. Otherwise, and with ``shared_nodes=False``, every gate has the probe's own
-    nodes (`PulsedProbe.nodes`, `CWProbe.nodes`). Both integrate the weighting's transfer
-    function within 0.01 up to the field's Nyquist wavenumber. The point probe: one node of
-    weight 1 at every gate.
-    """
-    probe = PointProbe() if probe is None else probe
-    _validate("gate_nodes", field, pattern, Mount([0.0, 0.0, 0.0]), probe)
-    ranges = np.asarray(pattern.ranges, np.float64)
-    if isinstance(probe, PointProbe):
-        return np.zeros((ranges.size, 1)), np.ones((ranges.size, 1))
-    probe, rule = _refine(field, pattern, probe, "gate_nodes", shared_nodes)
-    return _host_gate_nodes(probe, ranges, rule)
-
-
-def scan_points(field: AbstractField, pattern: ScanPattern, mount: Mount,
-                probe: AbstractProbe | None = None, *, shared_nodes: bool = True) -> np.ndarray:
-    """Every point `simulate_scan` samples for `pattern` from one `mount` in `field`, absolute
-    CFD metres ``(n, 3)`` (float64, host): each sub-ray's nodes of every gate as `gate_nodes`
-    lays them out (those the cut at the lidar drops included: they are sampled, then given
-    no weight), and every gate centre. Prepare a mesh's exact interpolation at them
-    (`lidarjax.io.load_field(..., exact_at=lambda grid: scan_points(grid, ...))`): the nodes
-    depend on the field's resolution, so pass the field that will be simulated, or its grid.
-    """
-    probe = PointProbe() if probe is None else probe
-    _validate("scan_points", field, pattern, mount, probe)
-    if mount.batch_shape:
-        raise ValueError("scan_points: needs one lidarjax.Mount, not a batch; call it per mount.")
-    ranges = np.asarray(pattern.ranges, np.float64)
-    offsets = gate_nodes(field, pattern, probe, shared_nodes=shared_nodes)[0]
-    node_r = np.concatenate([ranges[:, None] + offsets, ranges[:, None]], axis=1)
-    loc, n = host_sub_rays(pattern, mount)
-    return (loc + np.unique(node_r)[:, None, None] * n[None]).reshape(-1, 3)
-
-
-def host_sub_rays(pattern: ScanPattern, mount: Mount) -> tuple[np.ndarray, np.ndarray]:
-    """Host float64 geometry of `pattern`'s sub-rays from one `mount` (concrete numbers):
-    the lidar's location, absolute CFD metres ``(3,)``, and every sub-ray's unit direction in
-    the CFD frame ``(B, 3)`` (``B`` = rays x sub-rays, ray-major, as
-    `ScanPattern.sub_directions`)."""
-    rot = np.asarray(body_to_cfd_rotation(mount), np.float64)
-    n = np.asarray(pattern.sub_directions(), np.float64).reshape(-1, 3) @ rot.T  # (B, 3)
-    loc = np.asarray(mount.location, np.float64) + np.asarray(mount.location_lo, np.float64)
-    return loc, n
-
-
 def simulate_scan(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
                   probe: AbstractProbe | None = None,
                   start: Float[ArrayLike, ""] = 0.0, shared_nodes: bool = True) -> ScanResult:
@@ -196,7 +108,7 @@ def simulate_scan(field: AbstractField, pattern: ScanPattern, mount: Mount, *,
     """
     probe = PointProbe() if probe is None else probe
     _validate("simulate_scan", field, pattern, mount, probe)
-    probe, rule = _refine(field, pattern, probe, "simulate_scan", shared_nodes)
+    probe, rule = pattern_probe(field, pattern, probe, "simulate_scan", shared_nodes)
     return _steady_jit(field, pattern, mount, probe, _scalar(start, field.dtype), rule=rule)
 
 
@@ -235,7 +147,7 @@ def simulate_scan_series(field: AbstractField, pattern: ScanPattern, mount: Moun
     if motion is not None and not isinstance(motion, AbstractMotion):
         raise ValueError(f"simulate_scan_series: `motion` must be a lidarjax motion (SinusoidalMotion, "
                          f"SampledMotion), got {type(motion).__name__}.")
-    probe, rule = _refine(field, pattern, probe, "simulate_scan_series", shared_nodes)
+    probe, rule = pattern_probe(field, pattern, probe, "simulate_scan_series", shared_nodes)
     return _series_jit(field, pattern, mount, probe, _scalar(start, field.dtype), motion,
                        n_scans=int(n_scans), rule=None if motion is not None else rule)
 
@@ -256,7 +168,7 @@ def _moving_los(field, pattern, mount_d, origin_local, probe, t_sub, motion):
                             (mount_d.gamma + att[2], mount_d.pitch + att[0], mount_d.roll + att[1]))
         n = rotate(body_to_cfd_rotation(moved), n_body[j])
         at_t = lambda pts, dirs: field.los_local_at(pts, dirs, t)  # noqa: E731
-        los, _ = _beam_los(field, origin_local + rotate(to_cfd_rest, off), n[None], ranges, probe,
+        los, _ = beam_los(field, origin_local + rotate(to_cfd_rest, off), n[None], ranges, probe,
                            los=at_t)
         return los[:, 0] - jnp.dot(n, rotate(to_cfd_rest, vel), precision=jax.lax.Precision.HIGHEST)
 
@@ -267,7 +179,7 @@ def _moving_los(field, pattern, mount_d, origin_local, probe, t_sub, motion):
 
 def _core(field, pattern, mount, probe, start, n_scans, motion=None, rule=None):
     """The scan in one mount's geometry; `n_scans` None: steady; `rule`: the gates' shared
-    nodes (`lidarjax.probe.shared_gate_rule`), None: per-gate nodes."""
+    nodes (`lidarjax.beam.shared_gate_rule`), None: per-gate nodes."""
     dtype = field.dtype
     cast = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
     origin_local = difference(mount.location, mount.location_lo, field.origin, field.origin_lo,
@@ -278,16 +190,16 @@ def _core(field, pattern, mount, probe, start, n_scans, motion=None, rule=None):
     to_cfd = body_to_cfd_rotation(mount_d)
     n_cfd = rotate(to_cfd, pattern.sub_directions().reshape(r * k, 3))  # (B, 3)
     # every ray has the same gates: the probe's nodes are computed once per gate, (g, 1),
-    # and broadcast over the rays by `_beam_los` (its points are (g, B, q, 3))
+    # and broadcast over the rays by `beam_los` (its points are (g, B, q, 3))
     ranges = pattern.ranges[:, None]
 
-    def beam_los(los=None):
+    def pattern_los(los=None):
         if rule is None:
-            return _beam_los(field, origin_local, n_cfd, ranges, probe, los=los)
-        return _gates_los(field, origin_local, n_cfd, pattern.ranges, probe, rule, los=los)
+            return beam_los(field, origin_local, n_cfd, ranges, probe, los=los)
+        return gates_los(field, origin_local, n_cfd, pattern.ranges, probe, rule, los=los)
 
     if n_scans is None:
-        los, truncated = beam_los()
+        los, truncated = pattern_los()
         times = start + pattern.ray_times()
     else:
         scans = jnp.arange(n_scans, dtype=dtype)[:, None, None] * pattern.period
@@ -307,9 +219,9 @@ def _core(field, pattern, mount, probe, start, n_scans, motion=None, rule=None):
             return sampler(t)
 
         if motion is None:
-            los, truncated = beam_los(los_at)
+            los, truncated = pattern_los(los_at)
         else:  # the probe's cut at the lidar does not move with it: flags from the rest geometry
-            truncated = _beam_los(field, origin_local, n_cfd, ranges, probe)[1]
+            truncated = beam_los(field, origin_local, n_cfd, ranges, probe)[1]
             los = _moving_los(field, pattern, mount_d, origin_local, probe, t_sub, motion)
         times = start + scans[:, :, 0] + pattern.ray_times()[None]
     los = jnp.mean(los.reshape(los.shape[:-1] + (r, k)), axis=-1)  # (..., g, r)

@@ -8,7 +8,8 @@ import pytest
 from scipy import integrate
 
 import lidarjax as lj
-from lidarjax.forward import _beam_los, _simulate_jit
+from lidarjax.beam import beam_los
+from lidarjax.forward import _simulate_jit
 from lidarjax.probe import SPEED_OF_LIGHT
 
 PULSED = lj.PulsedProbe()
@@ -112,7 +113,7 @@ class QuadraticAlongBeam(lj.AbstractField):
 
 def _probe_los(field, probe, focus):
     n = field.n[None, :]
-    los, _ = _beam_los(field, jnp.zeros(3), n, jnp.array([[focus]]), probe)
+    los, _ = beam_los(field, jnp.zeros(3), n, jnp.array([[focus]]), probe)
     return float(los[0, 0])
 
 

@@ -194,7 +194,7 @@ def test_window_mean_numpy_nan_and_gradients():
     i m + q - 1`` as numpy computes them, NaN exactly where a window holds a NaN sample, and
     derivatives (samples and weights) finite for a loss that masks the NaN windows, matching
     finite differences."""
-    from lidarjax.probe import _window_mean
+    from lidarjax.beam import _window_mean
 
     rng = np.random.default_rng(5)
     m, q, g = 3, 7, 9
@@ -232,8 +232,8 @@ def test_convolution_and_gather_windows_agree(grid, probe):
     index gather on accelerators) give the same LOS, NaN and flags, also with the lidar at
     the grid's corner, where the nodes behind it are outside the grid (NaN) and the cut at
     the lidar must drop them from the near gates rather than make them NaN."""
-    from lidarjax.probe import _gates_los
-    from lidarjax.scanning.simulate import _refine
+    from lidarjax.beam import gates_los as _gates_los
+    from lidarjax.beam import pattern_probe as _refine
 
     field = grid[0]
     p = sc.ppi(2.0, sc.gate_ranges(30, 10.0, first=6.0), n_rays=8, azimuth_start=10.0, azimuth_stop=80.0)
