@@ -201,18 +201,26 @@ def simulate(
     if heights is None:
         raise ValueError("simulate: `heights` (m above the lidar) are needed for a profiling "
                          "scan; only a scanning pattern (lidarjax.ppi, ...) samples its own gates.")
-    if probe is None:
-        probe = PointProbe()
-    _validate(field, scan, mount, heights, u_ref, probe)
-    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller="simulate")
-    heights = jnp.atleast_1d(jnp.asarray(heights))
-    if not jnp.issubdtype(heights.dtype, jnp.floating):
-        heights = heights.astype(field.dtype)
+    probe, heights = _prepared(field, scan, mount, heights, u_ref, probe, "simulate")
     if u_ref is not None:
         u_ref = jnp.asarray(u_ref)
     return _simulate_jit(
         field, scan, mount, heights, u_ref, probe, ratio_tol, point_reference=point_reference
     )
+
+
+def _prepared(field, scan, mount, heights, u_ref, probe, caller):
+    """The checked inputs of `simulate` (and `beam_gradient`): ``(probe, heights)`` with the
+    probe's nodes chosen for the field along the mount's beams and the heights a float
+    array."""
+    if probe is None:
+        probe = PointProbe()
+    _validate(field, scan, mount, heights, u_ref, probe)
+    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller=caller)
+    heights = jnp.atleast_1d(jnp.asarray(heights))
+    if not jnp.issubdtype(heights.dtype, jnp.floating):
+        heights = heights.astype(field.dtype)
+    return probe, heights
 
 
 def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
@@ -332,13 +340,7 @@ def beam_gradient(
     if isinstance(scan, ScanPattern) or not isinstance(scan, Scan):
         raise ValueError("beam_gradient: `scan` must be a profiling lidarjax.Scan "
                          "(lidarjax.windcube_v2(), ...).")
-    if probe is None:
-        probe = PointProbe()
-    _validate(field, scan, mount, heights, None, probe)
-    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller="beam_gradient")
-    heights = jnp.atleast_1d(jnp.asarray(heights))
-    if not jnp.issubdtype(heights.dtype, jnp.floating):
-        heights = heights.astype(field.dtype)
+    probe, heights = _prepared(field, scan, mount, heights, None, probe, "beam_gradient")
     return _beam_gradient_jit(field, scan, mount, heights, probe)
 
 
