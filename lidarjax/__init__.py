@@ -76,6 +76,7 @@ from .flags import InverseFlag as InverseFlag
 from .flags import RecordFlag as RecordFlag
 from .footprint import scan_bounds as scan_bounds
 from .forward import Simulation as Simulation
+from .forward import beam_gradient as beam_gradient
 from .forward import simulate as simulate
 from .frames import beam_directions as beam_directions
 from .frames import body_to_cfd_rotation as body_to_cfd_rotation

@@ -1,32 +1,62 @@
 """Installation calibration: constant north offset and tilt estimated from many records.
 
-A lidar installed with a north offset ``epsilon`` and a tilt ``(pitch, roll)`` that differ
-from what its response table assumed (`ResponseTable.instrument`, 0 when unknown) measures,
-for a free stream of speed ``U`` and true meteorological direction ``d``, beam by beam,
+A lidar whose beams are turned and tilted by offsets ``theta = (d_epsilon, d_pitch,
+d_roll)`` (degrees) from the installation its response table assumed
+(`ResponseTable.instrument`, 0 when unknown) points beam ``b`` along ``n_b' = M(theta) n_b``
+instead of the table's ``n_b`` (north frame), with
 
-``los_hb = U * [R_hb(d - de) + ((M(dp, dr) - I) n_b) . V_hb(d - de)]``
+``M = Rz(-(e0 + d_epsilon)) T(p0 + d_pitch, r0 + d_roll) T(p0, r0)^T Rz(e0)``
 
-- ``R_hb``: the table's LOS response (per unit free-stream speed) at the direction the table
-  sees, ``d - de``: with the software north offset wrong by ``de = epsilon_true -
-  epsilon_table`` every direction label is shifted by ``-de`` (`lidarjax.frames`:
-  ``v_north = R(-epsilon) v_lidar``, so bearings grow by epsilon).
-- ``n_b``: the table's beam unit vectors (north frame); ``M = Rz(-e0) T(p0 + dp, r0 + dr)
-  T(p0, r0)^T Rz(e0)`` the change of beam directions by the tilt offsets (``T`` the
-  installation tilt of `lidarjax.tilt_rotation`, ``e0, p0, r0`` the table's installation).
+(``T`` the tilt of `lidarjax.tilt_rotation`, ``Rz`` `lidarjax.frames.rotation_z`,
+``e0, p0, r0`` the table's installation): the tilt offsets change the instrument's tilt,
+and a north offset turns the instrument about the vertical so that every beam's bearing
+grows by ``d_epsilon`` (`lidarjax.frames`: ``v_north = R(-epsilon) v_lidar``). Turning a
+beam does two things, both first order in the offset:
+
+1. it projects the flow on another direction: ``(n_b' - n_b) . V_hb``;
+2. it moves the measurement point (each node of the probe volume, at range ``r_k``, by
+   ``r_k (n_b' - n_b)``: up to 1.7 m at 136 m range for 0.7 degrees), where the flow differs
+   by ``G_hb r_k (n_b' - n_b)``. Relative to term 1 this is of order ``r |grad V| / U``:
+   0.1-0.15 over a ridge, about ``alpha tan(cone)`` (0.07) in power-law shear over flat
+   ground. It is **not** negligible: leaving it out biased roll by two standard errors over
+   a ridge (issue 29).
+
+For a free stream of speed ``U`` from the meteorological direction ``d``, the model is
+
+``los_hb = U * [R_hb(d) + (n_b' - n_b) . S_hb(d)]``,  ``S_hb = V_hb + rho_hb G_hb^T n_b'``
+
+- ``R_hb``: the table's LOS response (per unit free-stream speed) at ``d``;
 - ``V_hb``: the flow at the beam points per unit free-stream speed: the table's
-  `beam_velocity` when it has one, else its centre-line `point` velocity, else the
-  undisturbed horizontal free stream. Its vertical component is what a tilt turns into the
-  horizontal and back; the error of this first-order model is of order (tilt x distortion).
-  The focus points' small displacement by the tilt is neglected (second order).
+  `beam_velocity`, else its centre-line `point` velocity, else the undisturbed horizontal
+  free stream;
+- ``G_hb``: the table's `beam_gradient` (`lidarjax.beam_gradient`: the velocity gradient
+  weighted over the probe volume, each node by its range over the focus range ``rho_hb``;
+  the focus ranges are the table's heights over the cosines of the beams in the body frame
+  of its installation). Without it term 2 is left out, `calibrate` warns once and says so
+  in `Calibration.notes` (rebuild the table with ``fields=`` or ``lidarjax table``).
 
-`calibrate` finds the offsets ``theta`` (any subset of ``("epsilon", "pitch", "roll")``,
-degrees) that minimise the sum of squared LOS residuals over all records and heights,
-jointly with every record-height's own free stream (the nuisances: ``(u, v)`` without a
-reference, the speed ``U`` with a reference direction). The Jacobian of the forward model
-(``jax.jacfwd``) gives Gauss--Newton steps in which each record-height's nuisances are
-eliminated exactly (Schur complement: the reduced gradient is the gradient through the
-per-record inversion, by the implicit function theorem), so a year of records costs a few
-passes over the data.
+**Order of the model.** The beams turn exactly (``M`` is the exact rotation); the
+displacement enters through the gradient, at first order, with ``S`` taken along the beams
+as turned by the current estimate (relinearised every pass, its change with the offsets in
+the Jacobian), which also includes the displacement's cross term
+``(n_b' - n_b) . G (r (n_b' - n_b))``. What is left
+out is the flow's curvature over the displacement, ``(r |n' - n|)^2 |grad grad V| / 2``: of
+second order in the offsets, about 1e-4 of the tilt's effect for 2 degrees over a ridge of
+200 m half width, and a few 1e-3 for north offsets of 10 degrees. For larger offsets
+rebuild the table at the estimate (`Calibration.value`) and calibrate again: the offsets
+then left are small and the linearisation error falls quadratically.
+
+With ``north_offset="site"`` (the flow turns with the instrument, as the distortion of a
+platform that carries it) the north offset is a shift of the direction labels instead,
+``R_hb(d - d_epsilon)``, ``S_hb(d - d_epsilon)``, and ``M`` keeps ``Rz(-e0)``.
+
+`calibrate` finds the offsets (any subset of ``("epsilon", "pitch", "roll")``, degrees) that
+minimise the sum of squared LOS residuals over all records and heights, jointly with every
+record-height's own free stream (the nuisances: ``(u, v)`` without a reference, the speed
+``U`` with a reference direction). The Jacobian of the model gives Gauss--Newton steps in
+which each record-height's nuisances are eliminated exactly (Schur complement: the reduced
+gradient is the gradient through the per-record inversion, by the implicit function
+theorem), so a year of records costs a few passes over the data.
 
 **What is identifiable.**
 
@@ -35,12 +65,16 @@ passes over the data.
   directions, weighted by the table's sensitivity), pitch and roll.
 - *Without a reference*: pitch and roll, from the vertical beam and from how the apparent
   vertical wind (and the slanted beams' sum) varies with direction: a tilt turns the
-  horizontal wind into an apparent ``w = U (sin(dr) u_hat - sin(dp) v_hat)`` that follows
-  the wind direction, while the true mean ``w`` of the table does not. It needs records from
-  several directions. **Epsilon is not identifiable without a reference**: rotating every
-  direction by the same angle fits the records exactly as well (its Jacobian column is the
-  direction's). `calibrate` then returns NaN for it, ``identifiable = False`` and says so in
-  `notes`.
+  horizontal wind into an apparent vertical wind that follows the wind direction, while the
+  true mean ``w`` of the table does not. It needs records from several directions.
+  **Epsilon is not identifiable without a reference**: turning every direction by the same
+  angle fits the records almost as well. `calibrate` then returns NaN for it,
+  ``identifiable = False`` and says so in `notes`. Where the flow varies in space an unknown
+  turn still moves the measurement points; with ``north_offset="instrument"`` and a table
+  with `beam_gradient` that displacement is fitted as a nuisance (the turn itself is taken
+  up by the records' directions; a ridge of `RIDGE` holds it where the records cannot tell
+  it), so that it does not go into the tilt, whose standard errors are then marginal
+  over it.
 
 **Uncertainty.** ``cov = H^-1 B H^-1`` (the sandwich, `covariance="robust"`, default) with
 ``H`` the reduced Gauss--Newton matrix and ``B`` the sum over records of the outer products
@@ -49,22 +83,29 @@ record, and noise that varies between records, are accounted for), scaled by
 ``n / (n - k)``; or ``sigma**2 H^-1`` (`covariance="model"`) with ``sigma`` estimated from
 the residuals. 95 % intervals are ``offset +- 1.96 std``.
 
+The code follows the steps of the computation: `_checked` (arguments, before computing),
+`_flattened` (records to record-height problems), `_model_of` (the table as a
+`_CalibrationModel`), `_solve` (the compiled Gauss--Newton passes), `_covariance` and
+`_result`.
+
 Angles in degrees, north frame, meteorological directions (from, clockwise from north).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._precision import HIGHEST, is_concrete
+from .flags import InverseFlag
 from .frames import rotation_z, tilt_rotation
-from .response import ProfileTable, ResponseTable, locate
+from .response import ProfileTable, ResponseTable, _spline_coefficients, spline_at, tabulated_start
 
 __all__ = ["Calibration", "calibrate", "CALIBRATION_PARAMETERS"]
 
@@ -74,17 +115,31 @@ CALIBRATION_PARAMETERS = ("epsilon", "pitch", "roll")
 #: Largest change of (epsilon, pitch, roll) per Gauss--Newton pass, degrees (a trust region).
 _MAX_STEP = np.array([5.0, 1.0, 1.0])
 
-#: Gauss--Newton stops when no offset moved more than this in a pass, degrees.
-_TOLERANCE = 1e-7
+#: Gauss--Newton stops, converged, once no offset moved more than this in a pass, degrees.
+TOLERANCE = 1e-7
 
 #: A free offset is identifiable when the normalised reduced matrix's smallest eigenvalue
 #: along it exceeds this fraction of the largest (offsets correlated beyond 0.9999 are not).
 IDENTIFIABILITY_RCOND = 1e-4
 
+#: The ridge that holds a nuisance offset (epsilon without a reference) where the records
+#: cannot tell it, relative to the largest diagonal entry of the reduced matrix.
+RIDGE = 1e-6
+
 _NOT_IDENTIFIABLE_EPSILON = (
     "epsilon (north offset) is not identifiable without a reference: rotating every "
     "direction by one angle fits the records equally well; give reference=(speed, direction) "
     "from a mast, another lidar or a model")
+
+_EPSILON_AS_NUISANCE = (
+    "without a reference the north offset is kept as a nuisance: the displacement of the "
+    "measurement points by an unknown turn is fitted (the turn itself is taken up by the "
+    "records' directions), and the tilt's standard errors are marginal over it")
+
+_NO_GRADIENT = (
+    "the table has no beam_gradient: how the offsets move the measurement points is left "
+    "out (an error of order r |grad V| / U of the offsets, 0.1 over a ridge); rebuild the "
+    "table with ResponseTable.from_simulations(fields=...) or lidarjax table")
 
 
 class Calibration(eqx.Module):
@@ -100,9 +155,13 @@ class Calibration(eqx.Module):
     - `header`: the record header's value (degrees) where the records state one (pitch and
       roll of a Windcube ``.rtd``/``.sta``), else NaN.
     - `noise`: RMS LOS residual per beam, m/s; `n_records`, `n_problems`: records and
-      record-heights used; `iterations`: passes taken; `converged` (last step below 1e-6
-      degrees and every number finite).
-    - `notes`: what the records could not tell, in words.
+      record-heights used.
+    - `flags`: `InverseFlag` bits: ``NOT_CONVERGED`` (the offsets still moved by more than
+      `TOLERANCE` degrees in the last pass, or a number is not finite),
+      ``ILL_CONDITIONED`` (an asked-for offset is not identifiable); `converged` reads it.
+    - `num_steps`: Gauss--Newton passes taken; `last_step`: the largest change of an
+      offset in the last pass, degrees.
+    - `notes`: what the records could not tell, and the model's order, in words.
     """
 
     names: tuple[str, ...] = eqx.field(static=True)
@@ -115,11 +174,17 @@ class Calibration(eqx.Module):
     identifiable: Bool[Array, " k"]
     header: Float[Array, " k"]
     noise: Float[Array, ""]
-    n_records: int = eqx.field(static=True)
-    n_problems: int = eqx.field(static=True)
-    iterations: int = eqx.field(static=True)
-    converged: bool = eqx.field(static=True)
+    n_records: Int[Array, ""]
+    n_problems: Int[Array, ""]
+    flags: Int[Array, ""]
+    num_steps: Int[Array, ""]
+    last_step: Float[Array, ""]
     notes: tuple[str, ...] = eqx.field(static=True)
+
+    @property
+    def converged(self) -> bool:
+        """No ``NOT_CONVERGED`` bit in `flags`."""
+        return not int(self.flags) & int(InverseFlag.NOT_CONVERGED)
 
     def summary(self) -> list[str]:
         """One line per offset: estimate, standard error, 95 % interval, header value."""
@@ -139,94 +204,101 @@ class Calibration(eqx.Module):
 
 
 # ------------------------------------------------------------------------------------------
-# the forward model of one record-height
+# the model of one record-height
 
 
-def _spline_and_slope(geom, coefficients, hidx, direction):
-    """Values and direction derivatives (per degree) of a direction spline at one direction
-    per problem: `coefficients` ``(4, s, h, ...)``, `hidx`, `direction` ``(n,)`` ->
-    two ``(n, ...)`` arrays."""
-    start, offsets, widths, uniform = geom
-    k, t = locate(start, offsets, widths, uniform, direction)
-    c = coefficients[:, k, hidx]  # (4, n, ...)
-    tt = t.reshape(t.shape + (1,) * (c.ndim - 2))
-    wd = widths[k].reshape(tt.shape)
-    value = c[0] + tt * (c[1] + tt * (c[2] + tt * c[3]))
-    slope = (c[1] + tt * (2.0 * c[2] + 3.0 * tt * c[3])) / wd
-    return value, slope
+class _CalibrationModel(eqx.Module):
+    """The table as `calibrate`'s model needs it (north frame, per unit free-stream speed).
+
+    - `geom`: the direction splines' knots ``(start, offsets, widths, uniform)``;
+    - `response`: ``(4, s, h, b)`` coefficients of the LOS response ``R``;
+    - `velocity`: ``(4, s, h, b, 3)`` coefficients of the flow at the beam points ``V``;
+    - `gradient`: ``(4, s, h, b, 3, 3)`` coefficients of ``rho G`` (the beam gradient
+      times the focus range), or None;
+    - `beams`: ``(b, 3)`` the table's beam unit vectors ``n``;
+    - `nominal`: ``(3,)`` the table's installation ``(e0, p0, r0)``, degrees;
+    - `values`, `knots`: the tabulated response ``(s, h, b)`` and directions (the start).
+    """
+
+    geom: tuple
+    response: Float[Array, "4 s h b"]
+    velocity: Float[Array, "4 s h b 3"]
+    gradient: Float[Array, "4 s h b 3 3"] | None
+    beams: Float[Array, "b 3"]
+    nominal: Float[Array, " 3"]
+    values: Float[Array, "s h b"]
+    knots: Float[Array, " s"]
+    turn_beams: bool = eqx.field(static=True)
+
+    def turn(self, theta: Float[Array, " 3"]) -> Float[Array, "3 3"]:
+        """``M(theta)``: the table's beams to the turned and tilted ones (north frame); the
+        north offset turns them only with ``north_offset="instrument"``."""
+        e0, p0, r0 = self.nominal[0], self.nominal[1], self.nominal[2]
+        t_new = tilt_rotation(p0 + theta[1], r0 + theta[2])
+        t_old = tilt_rotation(p0, r0)
+        de = theta[0] if self.turn_beams else jnp.zeros_like(theta[0])
+        return rotation_z(-(e0 + de)) @ t_new @ t_old.T @ rotation_z(e0)
+
+    def sensitivity(self, theta: Float[Array, " 3"]) -> Float[Array, "4 s h b 3"]:
+        """Coefficients of ``S = V + rho G^T n'`` with the beams ``n'`` turned by `theta`:
+        the first-order change of the LOS per change of beam direction (linear in the
+        tabulated values, so the spline of ``S`` is this sum of splines)."""
+        if self.gradient is None:
+            return self.velocity
+        turned = self.beams @ self.turn(theta).T  # (b, 3)
+        return self.velocity + jnp.einsum("cshbij,bi->cshbj", self.gradient, turned,
+                                          precision=HIGHEST)
 
 
-def _tilt_change(theta_full, nominal):
-    """``M - I`` (3x3, north frame of the table) for offsets ``(de, dp, dr)``."""
-    e0, p0, r0 = nominal[0], nominal[1], nominal[2]
-    t_new = tilt_rotation(p0 + theta_full[1], r0 + theta_full[2])
-    t_old = tilt_rotation(p0, r0)
-    m = rotation_z(-e0) @ t_new @ t_old.T @ rotation_z(e0)
-    return m - jnp.eye(3, dtype=m.dtype)
-
-
-def _model_and_jacobian(beta, theta, ref_dir, hidx, ctx):
-    """LOS ``(n, b)`` of every record-height and its Jacobians, in closed form: in the
-    nuisances `beta` ``(n, m)`` (``(u, v)`` m/s, or the speed with a reference direction)
-    -> ``(n, b, m)``, and in the offsets ``(de, dp, dr)`` (degrees) -> ``(n, b, 3)``."""
-    geom, rc, vc, vkind, nvec, nominal = ctx
-    dtype = beta.dtype
-    # the beams' change by the tilt offsets and its derivatives, once for all problems
-    dn_of = lambda th: nvec @ _tilt_change(th, nominal).T  # noqa: E731  (b, 3)
-    dn = dn_of(theta)
-    ddn = jax.jacfwd(dn_of)(theta)  # (b, 3, 3[theta])
-    if beta.shape[1] == 2:
-        u, v = beta[:, 0], beta[:, 1]
+def _model_and_jacobian(model: _CalibrationModel, nuisance, theta, ref_dir, hidx):
+    """LOS ``(n, b)`` of every record-height per the module's model and its Jacobians: in
+    the `nuisance` ``(n, m)`` (``(u, v)`` m/s, or the speed with a reference direction)
+    -> ``(n, b, m)``, and in the offsets `theta` ``(3,)`` degrees -> ``(n, b, 3)``, with
+    ``S`` (`_CalibrationModel.sensitivity`) taken at `theta` and differentiated with it."""
+    dtype = nuisance.dtype
+    # the beams' change by the offsets and its derivatives, once for all problems
+    change = lambda th: model.beams @ (  # noqa: E731  (b, 3)
+        model.turn(th) - jnp.eye(3, dtype=dtype)).T
+    dn = change(theta)
+    ddn = jax.jacfwd(change)(theta)  # (b, 3, 3[theta])
+    if nuisance.shape[1] == 2:
+        u, v = nuisance[:, 0], nuisance[:, 1]
         h2 = u * u + v * v
         pos = h2 > 0
         safe = jnp.where(pos, h2, 1.0)
         speed = jnp.where(pos, jnp.sqrt(safe), 0.0)
         d = jnp.rad2deg(jnp.arctan2(jnp.where(pos, -u, 0.0), jnp.where(pos, -v, 1.0)))
     else:
-        speed, d = beta[:, 0], ref_dir
-    dl = d - theta[0]
-    r, dr = _spline_and_slope(geom, rc, hidx, dl)  # (n, b)
-    if vkind == "beam":
-        vel, dvel = _spline_and_slope(geom, vc, hidx, dl)  # (n, b, 3)
-    elif vkind == "point":
-        vel, dvel = _spline_and_slope(geom, vc, hidx, dl)  # (n, 3)
-        vel, dvel = vel[:, None, :], dvel[:, None, :]
-    else:
-        rad = jnp.deg2rad(dl)
-        zero = jnp.zeros_like(rad)
-        vel = jnp.stack([-jnp.sin(rad), -jnp.cos(rad), zero], -1)[:, None, :]
-        dvel = jnp.stack([-jnp.cos(rad), jnp.sin(rad), zero], -1)[:, None, :] * (np.pi / 180.0)
-    f = r + jnp.sum(dn * vel, -1)  # (n, b) per unit speed
-    df = dr + jnp.sum(dn * dvel, -1)  # per degree of direction
-    model = speed[:, None] * f
-    j_eps = -speed[:, None] * df
-    j_tilt = speed[:, None, None] * jnp.einsum("bkt,nbk->nbt", ddn, jnp.broadcast_to(
-        vel, f.shape + (3,)), precision=HIGHEST)  # (n, b, 3)
-    j_theta = jnp.concatenate([j_eps[..., None], j_tilt[..., 1:]], -1)
-    if beta.shape[1] == 2:
+        speed, d = nuisance[:, 0], ref_dir
+    # the direction the table sees: shifted by the north offset when the flow turns with
+    # the instrument (north_offset="site")
+    dl = d if model.turn_beams else d - theta[0]
+    # the beams' changes are the same for every problem: contracted with S on the table's
+    # coefficients (the splines are linear in them), so each problem evaluates one spline
+    # with its slope, ``R + dn . S``, and one without, ``(d dn / d theta) . S``
+    sens = model.sensitivity(theta)
+    f_c = model.response + jnp.einsum("cshbk,bk->cshb", sens, dn, precision=HIGHEST)
+    p_c = jnp.einsum("cshbk,bkt->cshbt", sens, ddn, precision=HIGHEST)
+    if model.gradient is not None:  # S turns with the beams: d S_j = rho G_ij d n_i
+        p_c = p_c + jnp.einsum("cshbij,bit,bj->cshbt", model.gradient, ddn, dn,
+                               precision=HIGHEST)
+    f, df = spline_at(model.geom, f_c, dl, (hidx,), slope=True)  # (n, b) per unit speed
+    los = speed[:, None] * f
+    j_theta = speed[:, None, None] * spline_at(model.geom, p_c, dl, (hidx,))  # (n, b, 3)
+    if not model.turn_beams:
+        j_theta = jnp.concatenate([-speed[:, None, None] * df[..., None], j_theta[..., 1:]],
+                                  -1)
+    if nuisance.shape[1] == 2:
         deg = 180.0 / np.pi
         su = jnp.where(pos, u / jnp.where(pos, speed, 1.0), 0.0)
         sv = jnp.where(pos, v / jnp.where(pos, speed, 1.0), 0.0)
         du = jnp.where(pos, v / safe, 0.0) * deg  # d(direction)/du, degrees per m/s
         dv = jnp.where(pos, -u / safe, 0.0) * deg
-        j_beta = jnp.stack([su[:, None] * f + speed[:, None] * df * du[:, None],
-                            sv[:, None] * f + speed[:, None] * df * dv[:, None]], -1)
+        j_nuisance = jnp.stack([su[:, None] * f + speed[:, None] * df * du[:, None],
+                                sv[:, None] * f + speed[:, None] * df * dv[:, None]], -1)
     else:
-        j_beta = f[..., None]
-    return model, j_beta.astype(dtype), j_theta.astype(dtype)
-
-
-def _start(los, w, values):
-    """Best tabulated direction and its closed-form speed per problem (as `invert`):
-    problems ``(r * h, b)`` record-major, `values` ``(s, h, b)``."""
-    s, h, b = values.shape
-    los, w = los.reshape(-1, h, b), w.reshape(-1, h, b)
-    a = jnp.einsum("rhb,shb->rhs", w * los, values, precision=HIGHEST)
-    c = jnp.einsum("rhb,shb->rhs", w, values * values, precision=HIGHEST)
-    uk = jnp.where((a > 0) & (c > 0), a / jnp.where(c > 0, c, 1.0), 0.0)
-    k = jnp.argmax(a * uk, axis=-1)
-    u0 = jnp.take_along_axis(uk, k[..., None], axis=-1)[..., 0]
-    return k.reshape(-1), u0.reshape(-1)
+        j_nuisance = f[..., None]
+    return los, j_nuisance.astype(dtype), j_theta.astype(dtype)
 
 
 def _small_inv(a):
@@ -244,127 +316,143 @@ def _small_inv(a):
     return jnp.where(ok[:, None, None], inv, 0.0), ok
 
 
-@eqx.filter_jit
-def _calibrate_core(los, w, ref_dir, hidx, rec, ctx, values, knots, free, iterations,
-                    n_records, with_ref):
-    """Schur-complement Gauss--Newton over the offsets (mask `free` of 3) and every
-    problem's nuisances; returns the offsets, the reduced matrices and residual facts."""
-    dtype = los.dtype
-    n, b = los.shape
-    k_start, u0 = _start(los, w, values)
-    if with_ref:
-        beta = u0[:, None]
-        # start from the closed-form speed at the reference direction
-        r_ref = _spline_and_slope(ctx[0], ctx[1], hidx, ref_dir)[0]
-        num = jnp.sum(w * los * r_ref, -1)
-        den = jnp.sum(w * r_ref * r_ref, -1)
-        beta = jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 0.0)[:, None]
-    else:
-        d0 = jnp.deg2rad(knots[k_start])
-        beta = jnp.stack([-u0 * jnp.sin(d0), -u0 * jnp.cos(d0)], -1)
-    theta = jnp.zeros(3, dtype)
-    freef = free.astype(dtype)
+# ------------------------------------------------------------------------------------------
+# the solve
 
-    def pieces(beta, theta):
-        model, jb, jt = _model_and_jacobian(beta, theta, ref_dir, hidx, ctx)
-        r = los - model
+
+class _Problems(eqx.Module):
+    """The records flattened to record-height problems: `los`, `weights` ``(n, b)``
+    (unusable beams: weight 0, LOS 0), `ref_dir` ``(n,)`` (degrees; 0 without a reference),
+    `height` and `record` indices ``(n,)``."""
+
+    los: Float[Array, "n b"]
+    weights: Float[Array, "n b"]
+    ref_dir: Float[Array, " n"]
+    height: Int[Array, " n"]
+    record: Int[Array, " n"]
+
+
+class _Solution(eqx.Module):
+    """What `_solve` returns: the offsets ``(3,)``, the reduced matrix `hessian` and the
+    sandwich's `meat` ``(3, 3)``, the weighted residual sum of squares, the observations
+    and problems used, and the passes' statistics."""
+
+    theta: Float[Array, " 3"]
+    hessian: Float[Array, "3 3"]
+    meat: Float[Array, "3 3"]
+    wrss: Float[Array, ""]
+    n_obs: Int[Array, ""]
+    n_ok: Int[Array, ""]
+    n_used: Int[Array, ""]
+    n_records: Int[Array, ""]
+    num_steps: Int[Array, ""]
+    last_step: Float[Array, ""]
+
+
+def _start(model: _CalibrationModel, problems: _Problems, with_ref: bool):
+    """Each problem's starting nuisance: the best tabulated direction's closed-form speed as
+    ``(u, v)``, or with a reference the closed-form speed at the reference direction."""
+    w, los = problems.weights, problems.los
+    if with_ref:
+        resp = spline_at(model.geom, model.response, problems.ref_dir, (problems.height,))
+        num = jnp.sum(w * los * resp, -1)
+        den = jnp.sum(w * resp * resp, -1)
+        return jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 0.0)[:, None]
+    s, h, b = model.values.shape
+    k, u0 = tabulated_start(w.reshape(-1, h, b), los.reshape(-1, h, b), model.values,
+                            "rhb,shb->rhs", 2)
+    d0 = jnp.deg2rad(model.knots[k.reshape(-1)])
+    u0 = u0.reshape(-1)
+    return jnp.stack([-u0 * jnp.sin(d0), -u0 * jnp.cos(d0)], -1)
+
+
+@eqx.filter_jit
+def _solve(model: _CalibrationModel, problems: _Problems, free, weak, max_passes, n_records,
+           with_ref):
+    """Schur-complement Gauss--Newton over the offsets (mask `free` of 3) and every
+    problem's nuisances, `S` relinearised at every pass; see the module docstring. The
+    offsets in `weak` (a subset of `free`) are held near 0 by a ridge of `RIDGE` times the
+    largest diagonal of the reduced matrix where the records cannot tell them."""
+    dtype = problems.los.dtype
+    w = problems.weights
+    freef = free.astype(dtype)
+    weakf = weak.astype(dtype)
+
+    def pieces(nuisance, theta):
+        los, jn, jt = _model_and_jacobian(model, nuisance, theta, problems.ref_dir,
+                                          problems.height)
+        resid = problems.los - los
         jt = jt * freef
-        a = jnp.einsum("nb,nbi,nbj->nij", w, jb, jb, precision=HIGHEST)
-        gb = jnp.einsum("nb,nbi,nb->ni", w, jb, r, precision=HIGHEST)
-        c = jnp.einsum("nb,nbi,nbj->nij", w, jb, jt, precision=HIGHEST)
+        a = jnp.einsum("nb,nbi,nbj->nij", w, jn, jn, precision=HIGHEST)
+        gn = jnp.einsum("nb,nbi,nb->ni", w, jn, resid, precision=HIGHEST)
+        c = jnp.einsum("nb,nbi,nbj->nij", w, jn, jt, precision=HIGHEST)
         ainv, ok = _small_inv(a)
         okf = ok.astype(dtype)
         tt = jnp.einsum("nb,nbi,nbj->nij", w, jt, jt, precision=HIGHEST)
-        gt = jnp.einsum("nb,nbi,nb->ni", w, jt, r, precision=HIGHEST)
+        gt = jnp.einsum("nb,nbi,nb->ni", w, jt, resid, precision=HIGHEST)
         ca = jnp.einsum("nki,nkl->nil", c, ainv, precision=HIGHEST)  # C^T A^-1 (n, 3, m)
         h_i = (tt - jnp.einsum("nil,nlj->nij", ca, c, precision=HIGHEST)) * okf[:, None, None]
-        s_i = (gt - jnp.einsum("nil,nl->ni", ca, gb, precision=HIGHEST)) * okf[:, None]
-        return r, h_i, s_i, ainv, gb, c, ok
+        s_i = (gt - jnp.einsum("nil,nl->ni", ca, gn, precision=HIGHEST)) * okf[:, None]
+        return resid, h_i, s_i, ainv, gn, c, ok
 
-    def solve_theta(hmat, g):
-        eye = jnp.eye(3, dtype=dtype)
-        hm = hmat * freef[:, None] * freef[None, :] + eye * (1.0 - freef)[:, None]
-        return jnp.linalg.solve(hm, g * freef)
-
+    eye = jnp.eye(3, dtype=dtype)
     limit = jnp.asarray(_MAX_STEP, dtype)
+    zero = jnp.zeros((), dtype)
 
     def step(carry):
-        it, beta, theta, _ = carry
-        r, h_i, s_i, ainv, gb, c, ok = pieces(beta, theta)
+        # one evaluation per pass: the statistics of the point it is at, then the step
+        it, nuisance, theta, _, _ = carry
+        resid, h_i, s_i, ainv, gn, c, ok = pieces(nuisance, theta)
         hmat, g = jnp.sum(h_i, 0), jnp.sum(s_i, 0)
+        # the sandwich's meat: per record, the sum of its problems' reduced gradients
+        s_rec = jax.ops.segment_sum(s_i, problems.record, num_segments=n_records)
+        sol = _Solution(
+            theta=theta, hessian=hmat,
+            meat=jnp.einsum("ri,rj->ij", s_rec, s_rec, precision=HIGHEST),
+            wrss=jnp.sum(w * resid * resid * ok[:, None]),
+            n_obs=jnp.sum((w > 0) & ok[:, None]), n_ok=jnp.sum(ok),
+            n_used=jnp.sum(jnp.any(w > 0, -1) & ok),
+            n_records=jnp.sum(jax.ops.segment_max(jnp.any(w > 0, -1), problems.record,
+                                                  num_segments=n_records)),
+            num_steps=it, last_step=zero)
+        ridge = weakf * (RIDGE * jnp.max(jnp.diagonal(hmat) * freef))
+        hm = (hmat * freef[:, None] * freef[None, :] + eye * (1.0 - freef)[:, None]
+              + jnp.diag(ridge))
+        g = g - ridge * theta
         # a trust region: at most 5 degrees of north offset and 1 degree of tilt per pass
-        dtheta = jnp.clip(solve_theta(hmat, g), -limit, limit)
-        dbeta = jnp.einsum("nij,nj->ni", ainv, gb - jnp.einsum("nij,j->ni", c, dtheta))
-        dbeta = jnp.where(ok[:, None], dbeta, 0.0)
-        return it + 1, beta + dbeta, theta + dtheta, jnp.max(jnp.abs(dtheta))
+        dtheta = jnp.clip(jnp.linalg.solve(hm, g * freef), -limit, limit)
+        dnuis = jnp.einsum("nij,nj->ni", ainv, gn - jnp.einsum("nij,j->ni", c, dtheta))
+        dnuis = jnp.where(ok[:, None], dnuis, 0.0)
+        # convergence is judged on the offsets reported: a nuisance offset (epsilon without
+        # a reference) that the records hardly tell creeps on for passes while moving the
+        # reported ones by far less than their rounding
+        moved = jnp.max(jnp.abs(dtheta) * freef * (1.0 - weakf))
+        return it + 1, nuisance + dnuis, theta + dtheta, moved, sol
 
     def going(carry):
-        it, _, _, last = carry
+        it, _, _, last, _ = carry
         # at least three passes (the nuisances settle), then until the offsets stop moving
-        return (it < iterations) & ((it < 3) | ~(last < _TOLERANCE))
+        return (it < max_passes) & ((it < 3) | ~(last < TOLERANCE))
 
-    start = (jnp.asarray(0), beta, theta, jnp.asarray(jnp.inf, dtype))
-    passes, beta, theta, last = jax.lax.while_loop(going, step, start)
-    r, h_i, s_i, _, _, _, ok = pieces(beta, theta)
-    hmat = jnp.sum(h_i, 0)
-    # the sandwich's meat: per record, the sum of its problems' reduced gradients
-    s_rec = jax.ops.segment_sum(s_i, rec, num_segments=n_records)
-    meat = jnp.einsum("ri,rj->ij", s_rec, s_rec, precision=HIGHEST)
-    wrss = jnp.sum(w * r * r * ok[:, None])
-    nobs = jnp.sum((w > 0) & ok[:, None])
-    n_ok = jnp.sum(ok)
-    return (theta, hmat, meat, wrss, nobs, n_ok, last, jnp.sum(jnp.any(w > 0, -1) & ok),
-            passes)
+    nuisance0 = _start(model, problems, with_ref)
+    theta0 = jnp.zeros(3, dtype)
+    empty = jax.eval_shape(lambda: step((jnp.asarray(0), nuisance0, theta0, zero, None))[4])
+    empty = jax.tree_util.tree_map(lambda x: jnp.zeros(x.shape, x.dtype), empty)
+    start = (jnp.asarray(0), nuisance0, theta0, jnp.asarray(jnp.inf, dtype), empty)
+    passes, _, theta, last, sol = jax.lax.while_loop(going, step, start)
+    # the statistics are those of the last pass's starting point, which the last step (below
+    # TOLERANCE when converged) moved by less than the offsets' rounding matters for
+    return eqx.tree_at(lambda x: (x.theta, x.num_steps, x.last_step), sol,
+                       (theta, passes, last))
 
 
-def _as_array(x, name):
-    if x is None:
-        return None
-    a = np.asarray(x, np.float64)
-    return a
+# ------------------------------------------------------------------------------------------
+# the steps of `calibrate` before and after the solve
 
 
-def calibrate(
-    records,
-    table: ResponseTable,
-    wrt: tuple[str, ...] | list[str] = CALIBRATION_PARAMETERS,
-    reference=None,
-    *,
-    weights: Float[ArrayLike, "r h b"] | None = None,
-    min_beams: int = 3,
-    iterations: int = 12,
-    covariance: str = "robust",
-) -> Calibration:
-    """Constant installation offsets (north offset, pitch, roll) from many records.
-
-    **Arguments:**
-
-    - `records`: LOS records ``(r, h, b)`` (m/s, positive away from the lidar, beams and
-      heights as in the table; NaN marks a missing beam), or an object with a `los` array
-      of that shape (a `lidarjax.RecordSet` of a ``.rtd`` file, whose `pitch` and `roll`
-      header values are then compared with the estimate).
-    - `table`: the site's `ResponseTable` with `beam_vectors` (and, best, `beam_velocity`
-      or `point`), built for the nominal installation (`table.instrument`; level and
-      ``epsilon = 0`` when it states none). For a `ProfileTable` pass ``table.at(value)``.
-    - `wrt`: the offsets to estimate, any of ``("epsilon", "pitch", "roll")``.
-    - `reference`: None, or the free stream at the records' times and the table's heights:
-      a pair ``(speed, direction)`` of ``(r, h)`` arrays (m/s, meteorological degrees;
-      speed may be None) or an object with `speed` and `direction` arrays. NaN marks a
-      missing reference value (that record-height is not used). The offsets rest on the
-      reference *directions*: the speed stays a free nuisance per record-height, so a
-      reference whose speed calibration differs from the lidar's cannot bias the angles.
-    - `weights`: optional ``(r, h, b)`` relative inverse variances of the beams.
-    - `min_beams`: fewest usable beams for a record-height to count (default 3).
-    - `iterations`: most Gauss--Newton passes over the records (default 12; each pass
-      updates the offsets, by at most 5 degrees of epsilon and 1 degree of tilt, and every
-      record-height's free stream; it stops once the offsets move less than 1e-7 degrees).
-    - `covariance`: ``"robust"`` (record-clustered sandwich, default) or ``"model"``
-      (``sigma**2 H^-1``); see the module docstring.
-
-    **Returns:** a `Calibration`. Without a reference, epsilon is NaN with
-    ``identifiable = False`` and a note. Raises `ValueError` before computing for unknown
-    names in `wrt`, shapes that do not match the table, or a table without beam vectors.
-    """
+def _checked(records, table, wrt, reference, covariance, north_offset):
+    """The arguments checked before anything is computed: ``(names, los, ref_speed,
+    ref_dir, header)``; raises `ValueError` naming the argument and the fix."""
     fname = "calibrate"
     if isinstance(table, ProfileTable):
         raise ValueError(f"{fname}: pass a ResponseTable; for a ProfileTable use table.at(value) "
@@ -377,6 +465,10 @@ def calibrate(
     if bad or not names or len(set(names)) != len(names):
         raise ValueError(f"{fname}: `wrt` must name distinct offsets among "
                          f"{CALIBRATION_PARAMETERS}, got {wrt!r}.")
+    if north_offset not in ("instrument", "site"):
+        raise ValueError(f"{fname}: `north_offset` must be 'instrument' (the instrument turned "
+                         "on its site) or 'site' (the flow turns with it: a platform's heading), "
+                         f"got {north_offset!r}.")
     if covariance not in ("robust", "model"):
         raise ValueError(f"{fname}: `covariance` must be 'robust' or 'model', got "
                          f"{covariance!r}.")
@@ -387,7 +479,6 @@ def calibrate(
         raise ValueError(f"{fname}: the records carry no LOS (a .sta file reports winds only); "
                          "calibrate needs raw LOS records such as a Windcube .rtd.")
     los = jnp.asarray(los_in)
-    dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else table.dtype
     h, b = table.n_heights, table.n_beams
     if los.ndim != 3 or los.shape[1:] != (h, b):
         raise ValueError(f"{fname}: `records` must be LOS shaped (r, h, b) with (h, b) = "
@@ -396,9 +487,8 @@ def calibrate(
         raise ValueError(f"{fname}: the table has no beam_vectors; build it with a mount "
                          "(ResponseTable.from_simulations(mount=...), lidarjax table).")
     r = los.shape[0]
-    with_ref = reference is not None
     ref_speed = ref_dir = None
-    if with_ref:
+    if reference is not None:
         if isinstance(reference, tuple | list):
             if len(reference) != 2:
                 raise ValueError(f"{fname}: `reference` must be (speed, direction) arrays "
@@ -407,97 +497,156 @@ def calibrate(
         else:
             ref_speed = getattr(reference, "speed", None)
             ref_dir = getattr(reference, "direction", None)
-        ref_dir = _as_array(ref_dir, "direction")
-        ref_speed = _as_array(ref_speed, "speed")
+        ref_dir = None if ref_dir is None else np.asarray(ref_dir, np.float64)
+        ref_speed = None if ref_speed is None else np.asarray(ref_speed, np.float64)
         if ref_dir is None or ref_dir.shape != (r, h) or (
                 ref_speed is not None and ref_speed.shape != (r, h)):
             raise ValueError(f"{fname}: `reference` speed and direction must be shaped (r, h) = "
                              f"{(r, h)} like the records; got "
                              f"{None if ref_dir is None else ref_dir.shape}.")
-    if weights is None:
-        w = jnp.ones(los.shape, dtype)
-    else:
+    return names, los, ref_speed, ref_dir, header
+
+
+def _flattened(los, table, weights, ref_speed, ref_dir, min_beams, with_ref, dtype):
+    """Records ``(r, h, b)`` to record-height `_Problems` ``(r * h, ...)``, record-major,
+    keeping the record-heights with at least `min_beams` usable beams (and a reference)."""
+    if weights is not None:
         w = jnp.broadcast_to(jnp.asarray(weights, dtype), los.shape)
         if is_concrete(w) and (np.any(np.asarray(w) < 0) or np.any(np.isinf(np.asarray(w)))):
-            raise ValueError(f"{fname}: `weights` must be finite and nonnegative.")
-        w = jnp.where(jnp.isnan(w), 0.0, w)
-    usable = jnp.isfinite(los) & (w > 0) & table.valid
-    enough = jnp.sum(usable, -1) >= int(min_beams)  # (r, h)
-    if with_ref:
-        enough = enough & jnp.isfinite(jnp.asarray(ref_dir))
-        if ref_speed is not None:
-            enough = enough & jnp.isfinite(jnp.asarray(ref_speed))
-    w = jnp.where(usable & enough[..., None], w, 0.0).astype(dtype)
-    los = jnp.where(w > 0, los, 0.0).astype(dtype)
-    n = r * h
-    flat = lambda x: x.reshape((n,) + x.shape[2:])  # noqa: E731
-    hidx = flat(jnp.broadcast_to(jnp.arange(h, dtype=jnp.int32), (r, h)))
-    rec = flat(jnp.broadcast_to(jnp.arange(r, dtype=jnp.int32)[:, None], (r, h)))
-    rdir = jnp.zeros((n,), dtype) if ref_dir is None else flat(
-        jnp.asarray(np.nan_to_num(ref_dir), dtype))
-    sp = table.response_spline
-    geom = (sp.start.astype(dtype), sp.offsets.astype(dtype), sp.widths.astype(dtype),
-            sp.uniform)
-    if table.beam_velocity_spline is not None:
-        vkind, vc = "beam", table.beam_velocity_spline.coefficients
-    elif table.point_spline is not None:
-        vkind, vc = "point", table.point_spline.coefficients
+            raise ValueError("calibrate: `weights` must be finite and nonnegative.")
     else:
-        vkind, vc = "free", jnp.zeros((4, 1, 1), dtype)
-    inst = table.instrument
-    nominal_all = np.array([0.0 if inst is None or getattr(inst, f"{x}_deg") is None
-                            else float(getattr(inst, f"{x}_deg"))
-                            for x in CALIBRATION_PARAMETERS])
-    ctx = (geom, sp.coefficients.astype(dtype), vc.astype(dtype), vkind,
-           table.beam_vectors.astype(dtype), jnp.asarray(nominal_all, dtype))
-    free = np.array([x in names for x in CALIBRATION_PARAMETERS])
+        w = None
+    as_array = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
+    return _flatten(los.astype(dtype), w, table.valid, as_array(ref_speed), as_array(ref_dir),
+                    int(min_beams), bool(with_ref))
+
+
+@eqx.filter_jit
+def _flatten(los, w, valid, ref_speed, ref_dir, min_beams, with_ref):
+    """`_flattened`'s array work, one compiled program (not a dozen eager operations over
+    the year's records)."""
+    dtype = los.dtype
+    w = jnp.ones(los.shape, dtype) if w is None else jnp.where(jnp.isnan(w), 0.0, w)
+    usable = jnp.isfinite(los) & (w > 0) & valid
+    enough = jnp.sum(usable, -1) >= min_beams  # (r, h)
+    if with_ref:
+        enough = enough & jnp.isfinite(ref_dir)
+        if ref_speed is not None:
+            enough = enough & jnp.isfinite(ref_speed)
+    w = jnp.where(usable & enough[..., None], w, 0.0).astype(dtype)
+    los = jnp.where(w > 0, los, 0.0)
+    r, h = los.shape[:2]
+    flat = lambda x: x.reshape((r * h,) + x.shape[2:])  # noqa: E731
+    return _Problems(
+        los=flat(los), weights=flat(w),
+        ref_dir=jnp.zeros((r * h,), dtype) if ref_dir is None else flat(
+            jnp.where(jnp.isfinite(ref_dir), ref_dir, 0.0)),
+        height=flat(jnp.broadcast_to(jnp.arange(h, dtype=jnp.int32), (r, h))),
+        record=flat(jnp.broadcast_to(jnp.arange(r, dtype=jnp.int32)[:, None], (r, h))))
+
+
+def _model_of(table: ResponseTable, dtype, north_offset: str = "instrument"
+              ) -> tuple[_CalibrationModel, list[str]]:
+    """The table as a `_CalibrationModel`, and notes on what it lacks."""
     notes = []
-    if not with_ref and free[0]:
-        free[0] = False
-        notes.append(_NOT_IDENTIFIABLE_EPSILON)
-    values = jnp.where(table.valid, table.response, 0.0).astype(dtype)
-    theta, hmat, meat, wrss, nobs, n_ok, last, n_used, passes = _calibrate_core(
-        flat(los), flat(w), rdir, hidx, rec, ctx, values, table.directions.astype(dtype),
-        jnp.asarray(free), int(iterations), int(r), bool(with_ref))
-    theta, hmat, meat = (np.asarray(x, np.float64) for x in (theta, hmat, meat))
-    n_used = int(n_used)
-    n_rec = int(np.unique(np.asarray(rec)[np.asarray(flat(w)).sum(-1) > 0]).size)
+    inst = table.instrument
+    nominal = np.array([0.0 if inst is None or getattr(inst, f"{x}_deg") is None
+                        else float(getattr(inst, f"{x}_deg")) for x in CALIBRATION_PARAMETERS])
+    sp = table.response_spline
+    s, h, b = table.response.shape
+    if table.beam_velocity_spline is not None:
+        velocity = table.beam_velocity_spline.coefficients
+    elif table.point_spline is not None:
+        velocity = jnp.broadcast_to(table.point_spline.coefficients[:, :, :, None, :],
+                                    (4, s, h, b, 3))
+    else:  # the undisturbed horizontal free stream, as a spline through the knots
+        d = np.deg2rad(np.asarray(table.directions, np.float64))
+        free = np.stack([-np.sin(d), -np.cos(d), np.zeros_like(d)], -1)
+        velocity = jnp.broadcast_to(jnp.asarray(_spline_coefficients(
+            np.asarray(table.directions, np.float64), free))[:, :, None, None, :],
+            (4, s, h, b, 3))
+    beams = np.asarray(table.beam_vectors, np.float64)
+    gradient = None
+    if table.beam_gradient_spline is None:
+        notes.append(_NO_GRADIENT)
+    elif table.heights is None:
+        notes.append(_NO_GRADIENT.replace("has no beam_gradient", "has no heights"))
+    else:
+        # focus ranges: heights over the beams' cosines in the body frame of the
+        # installation (as `simulate` computes them: the instrument assumes it is level)
+        e0, p0, r0 = nominal
+        body = beams @ (np.asarray(tilt_rotation(p0, r0), np.float64).T
+                        @ np.asarray(rotation_z(e0), np.float64)).T
+        ranges = np.asarray(table.heights, np.float64)[:, None] / body[None, :, 2]  # (h, b)
+        gradient = (table.beam_gradient_spline.coefficients
+                    * jnp.asarray(ranges, table.dtype)[None, None, :, :, None, None])
+        notes.append("model: the beams turned exactly, the measurement points' displacement "
+                     "to first order (the table's beam_gradient), relinearised around the "
+                     "estimate at every pass; second order in the offsets is left out (the "
+                     "flow's curvature over the displacement): for offsets of several "
+                     "degrees rebuild the table at the estimate and calibrate again")
+    values = jnp.where(table.valid, table.response, 0.0)
+    cast = lambda x: None if x is None else jnp.asarray(x, dtype)  # noqa: E731
+    model = _CalibrationModel(
+        geom=(cast(sp.start), cast(sp.offsets), cast(sp.widths), sp.uniform),
+        response=cast(sp.coefficients), velocity=cast(velocity), gradient=cast(gradient),
+        beams=cast(beams), nominal=cast(nominal), values=cast(values),
+        knots=cast(table.directions), turn_beams=north_offset == "instrument")
+    return model, notes
+
+
+def _covariance(sol: _Solution, free, weak, with_ref, n_rec, covariance):
+    """``(identifiable (3,), cov (3, 3), sigma2)`` on the host from the solution: for the
+    offsets in `free` but not `weak`, marginal over the `weak` ones (their ridge kept)."""
+    hmat, meat = (np.asarray(x, np.float64) for x in (sol.hessian, sol.meat))
     m = 1 if with_ref else 2
-    k_free = int(free.sum())
-    dof = max(int(nobs) - m * int(n_ok) - k_free, 1)
-    sigma2 = float(wrss) / dof
-    # identifiability: eigenvalues of the normalised reduced matrix over the free offsets
-    idx = np.flatnonzero(free)
+    dof = max(int(sol.n_obs) - m * int(sol.n_ok) - int(free.sum()), 1)
+    sigma2 = float(sol.wrss) / dof
     ident = np.zeros(3, bool)
     cov = np.full((3, 3), np.nan)
-    if idx.size:
-        hs = hmat[np.ix_(idx, idx)]
-        d = np.sqrt(np.maximum(np.diag(hs), 0.0))
-        ok_d = d > 0
-        if ok_d.all():
-            hn = hs / np.outer(d, d)
-            eig, vec = np.linalg.eigh(hn)
-            weak = eig < IDENTIFIABILITY_RCOND * max(eig[-1], 1e-300)
-            ident[idx] = True
-            for j in np.flatnonzero(weak):  # offsets along a null direction are not identified
-                ident[idx[np.abs(vec[:, j]) > 0.3]] = False
-            if ident[idx].any():
-                sub = idx[ident[idx]]
-                hsub = hmat[np.ix_(sub, sub)]
-                hinv = np.linalg.inv(hsub)
-                if covariance == "robust":
-                    corr = n_rec / max(n_rec - sub.size, 1)
-                    c = hinv @ meat[np.ix_(sub, sub)] @ hinv * corr
-                else:
-                    c = sigma2 * hinv
-                cov[np.ix_(sub, sub)] = c
+    shown = np.flatnonzero(free & ~weak)
+    held = np.flatnonzero(weak)
+    if not shown.size:
+        return ident, cov, sigma2
+    hreg = hmat + np.diag(weak * RIDGE * np.max(np.diag(hmat) * free, initial=0.0))
+    # identifiability: eigenvalues of the normalised reduced matrix of the shown offsets,
+    # the held ones eliminated
+    hs = hreg[np.ix_(shown, shown)]
+    if held.size:
+        hw = hreg[np.ix_(held, held)]
+        if np.all(np.diag(hw) > 0):
+            cross = hreg[np.ix_(shown, held)]
+            hs = hs - cross @ np.linalg.solve(hw, cross.T)
+    d = np.sqrt(np.maximum(np.diag(hs), 0.0))
+    if not np.all(d > 0):
+        return ident, cov, sigma2
+    eig, vec = np.linalg.eigh(hs / np.outer(d, d))
+    weak_dirs = eig < IDENTIFIABILITY_RCOND * max(eig[-1], 1e-300)
+    ident[shown] = True
+    for j in np.flatnonzero(weak_dirs):  # offsets along a null direction are not identified
+        ident[shown[np.abs(vec[:, j]) > 0.3]] = False
+    if ident[shown].any():
+        sub = np.concatenate([shown[ident[shown]], held])
+        k = int(ident[shown].sum())
+        hinv = np.linalg.inv(hreg[np.ix_(sub, sub)])
+        if covariance == "robust":
+            c = hinv @ meat[np.ix_(sub, sub)] @ hinv * (n_rec / max(n_rec - sub.size, 1))
         else:
-            ident[idx[ok_d]] = False
-    converged = bool(np.isfinite(float(last)) and float(last) < 1e-6 and np.all(
-        np.isfinite(theta)))
+            c = sigma2 * hinv
+        keep = sub[:k]
+        cov[np.ix_(keep, keep)] = c[:k, :k]
+    return ident, cov, sigma2
+
+
+def _result(names, sol, free, ident, cov, sigma2, nominal, header, n_rec, notes, dtype):
+    """The `Calibration` of the offsets `names` from the solution."""
+    theta = np.asarray(sol.theta, np.float64)
+    last = float(sol.last_step)
+    converged = math.isfinite(last) and last < TOLERANCE and bool(np.all(np.isfinite(theta)))
+    notes = list(notes)
     if not converged:
-        notes.append(f"did not converge in {int(passes)} passes (offsets still moving by "
-                     f"{float(last):.2g} deg): these records do not determine the offsets; the "
+        notes.append(f"did not converge in {int(sol.num_steps)} passes (offsets still moving "
+                     f"by {last:.2g} deg): these records do not determine the offsets; the "
                      "values are the last iterate, not an estimate")
     for j, name in enumerate(CALIBRATION_PARAMETERS):
         if free[j] and not ident[j]:
@@ -509,13 +658,97 @@ def calibrate(
     std = np.sqrt(np.diag(cov))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
-    nom = nominal_all[sel]
-    head = np.array([header.get(x, math.nan) for x in names])
+    nom = np.asarray(nominal, np.float64)[sel]
+    flags = (0 if converged else int(InverseFlag.NOT_CONVERGED)) | (
+        int(InverseFlag.ILL_CONDITIONED) if np.any(free & ~ident) else 0)
     f = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+    i32 = lambda a: jnp.asarray(a, jnp.int32)  # noqa: E731
     return Calibration(
         names=names, offset=f(off), value=f(nom + off), nominal=f(nom), std=f(std),
         covariance=f(cov), correlation=f(corr), identifiable=jnp.asarray(ident[sel]),
-        header=f(head), noise=f(math.sqrt(sigma2)),
-        n_records=n_rec,
-        n_problems=n_used, iterations=int(passes), converged=converged,
-        notes=tuple(notes))
+        header=f([header.get(x, math.nan) for x in names]), noise=f(math.sqrt(sigma2)),
+        n_records=i32(n_rec), n_problems=i32(int(sol.n_used)), flags=i32(flags),
+        num_steps=i32(int(sol.num_steps)), last_step=f(last), notes=tuple(notes))
+
+
+def calibrate(
+    records,
+    table: ResponseTable,
+    wrt: tuple[str, ...] | list[str] = CALIBRATION_PARAMETERS,
+    reference=None,
+    *,
+    weights: Float[ArrayLike, "r h b"] | None = None,
+    min_beams: int = 3,
+    iterations: int = 12,
+    covariance: str = "robust",
+    north_offset: str = "instrument",
+) -> Calibration:
+    """Constant installation offsets (north offset, pitch, roll) from many records.
+
+    **Arguments:**
+
+    - `records`: LOS records ``(r, h, b)`` (m/s, positive away from the lidar, beams and
+      heights as in the table; NaN marks a missing beam), or an object with a `los` array
+      of that shape (a `lidarjax.RecordSet` of a ``.rtd`` file, whose `pitch` and `roll`
+      header values are then compared with the estimate).
+    - `table`: the site's `ResponseTable` with `beam_vectors` (and, best, `beam_velocity`
+      and `beam_gradient`: `ResponseTable.from_simulations(..., mount=, fields=)` or
+      ``lidarjax table``), built for the nominal installation (`table.instrument`; level
+      and ``epsilon = 0`` when it states none). For a `ProfileTable` pass
+      ``table.at(value)``. Without `beam_gradient` the displacement of the measurement
+      points is left out, with a warning and a note.
+    - `wrt`: the offsets to estimate, any of ``("epsilon", "pitch", "roll")``.
+    - `reference`: None, or the free stream at the records' times and the table's heights:
+      a pair ``(speed, direction)`` of ``(r, h)`` arrays (m/s, meteorological degrees;
+      speed may be None) or an object with `speed` and `direction` arrays. NaN marks a
+      missing reference value (that record-height is not used). The offsets rest on the
+      reference *directions*: the speed stays a free nuisance per record-height, so a
+      reference whose speed calibration differs from the lidar's cannot bias the angles.
+    - `weights`: optional ``(r, h, b)`` relative inverse variances of the beams.
+    - `min_beams`: fewest usable beams for a record-height to count (default 3).
+    - `iterations`: most Gauss--Newton passes over the records (default 12; each pass
+      updates the offsets, by at most 5 degrees of epsilon and 1 degree of tilt, and every
+      record-height's free stream; it stops once the offsets move less than `TOLERANCE`,
+      1e-7 degrees, which is also what `Calibration.converged` asks).
+    - `covariance`: ``"robust"`` (record-clustered sandwich, default) or ``"model"``
+      (``sigma**2 H^-1``); see the module docstring.
+    - `north_offset`: what a north offset is. ``"instrument"`` (default): the instrument is
+      turned on its site, so its beams and measurement points turn while the flow (terrain,
+      buildings, a platform it stands on) stays. ``"site"``: the flow turns with the
+      instrument (a lidar and the platform distorting its flow share a heading error):
+      every direction label is shifted, ``R(d - d_epsilon)``. The two agree where the
+      flow does not vary in space.
+
+    **Returns:** a `Calibration`. Without a reference, epsilon is NaN with
+    ``identifiable = False`` and a note. Raises `ValueError` before computing for unknown
+    names in `wrt`, shapes that do not match the table, or a table without beam vectors.
+    """
+    names, los, ref_speed, ref_dir, header = _checked(records, table, wrt, reference,
+                                                      covariance, north_offset)
+    dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else table.dtype
+    with_ref = reference is not None
+    problems = _flattened(los, table, weights, ref_speed, ref_dir, min_beams, with_ref, dtype)
+    model, notes = _model_of(table, dtype, north_offset)
+    if model.gradient is None:
+        warnings.warn(f"calibrate: {notes[0]}", stacklevel=2)
+    free = np.array([x in names for x in CALIBRATION_PARAMETERS])
+    weak = np.zeros(3, bool)
+    if not with_ref and free[0]:
+        notes.append(_NOT_IDENTIFIABLE_EPSILON)
+        if model.turn_beams and model.gradient is not None:
+            # the turn itself is taken up by the records' directions, but where the flow
+            # varies in space it also moves the measurement points: that part is fitted (a
+            # nuisance, held by a ridge where the records cannot tell it), so that it does
+            # not go into the tilt
+            weak[0] = True
+            notes.append(_EPSILON_AS_NUISANCE)
+        else:
+            free[0] = False
+    n_records = los.shape[0]
+    sol = _solve(model, problems, jnp.asarray(free), jnp.asarray(weak),
+                 jnp.asarray(int(iterations), jnp.int32),
+                 int(n_records), bool(with_ref))
+    n_rec = int(sol.n_records)
+    ident, cov, sigma2 = _covariance(sol, free, weak, with_ref, n_rec, covariance)
+    return _result(names, sol, free & ~weak, ident, cov, sigma2, model.nominal, header,
+                   n_rec, notes, dtype)

@@ -17,7 +17,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._precision import difference, is_concrete
 from .angles import horizontal_speed, wind_direction
-from .beam import beam_los, probe_for_field, profile_geometry
+from .beam import _cut, beam_los, probe_for_field, profile_geometry
 from .corrections import DEFAULT_RATIO_TOL, correction_factors
 from .field import AbstractField
 from .flags import Flag
@@ -33,7 +33,7 @@ from .scan import ILL_CONDITIONED, Scan, reconstruct
 from .scanning.pattern import ScanPattern
 from .scanning.simulate import ScanResult, simulate_scan
 
-__all__ = ["Simulation", "simulate", "probe_for_field"]
+__all__ = ["Simulation", "simulate", "probe_for_field", "beam_gradient"]
 
 
 class Simulation(eqx.Module):
@@ -201,18 +201,26 @@ def simulate(
     if heights is None:
         raise ValueError("simulate: `heights` (m above the lidar) are needed for a profiling "
                          "scan; only a scanning pattern (lidarjax.ppi, ...) samples its own gates.")
-    if probe is None:
-        probe = PointProbe()
-    _validate(field, scan, mount, heights, u_ref, probe)
-    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller="simulate")
-    heights = jnp.atleast_1d(jnp.asarray(heights))
-    if not jnp.issubdtype(heights.dtype, jnp.floating):
-        heights = heights.astype(field.dtype)
+    probe, heights = _prepared(field, scan, mount, heights, u_ref, probe, "simulate")
     if u_ref is not None:
         u_ref = jnp.asarray(u_ref)
     return _simulate_jit(
         field, scan, mount, heights, u_ref, probe, ratio_tol, point_reference=point_reference
     )
+
+
+def _prepared(field, scan, mount, heights, u_ref, probe, caller):
+    """The checked inputs of `simulate` (and `beam_gradient`): ``(probe, heights)`` with the
+    probe's nodes chosen for the field along the mount's beams and the heights a float
+    array."""
+    if probe is None:
+        probe = PointProbe()
+    _validate(field, scan, mount, heights, u_ref, probe)
+    probe = probe_for_field(field, scan, heights, probe, mount=mount, caller=caller)
+    heights = jnp.atleast_1d(jnp.asarray(heights))
+    if not jnp.issubdtype(heights.dtype, jnp.floating):
+        heights = heights.astype(field.dtype)
+    return probe, heights
 
 
 def _simulate(field, scan, mount, heights, u_ref, probe, ratio_tol, *, point_reference):
@@ -298,3 +306,82 @@ def _simulate_traced(field, scan, mount, heights, u_ref, probe, ratio_tol, *, po
 
 
 _simulate_jit = jax.jit(_simulate, static_argnames=("point_reference",))
+
+
+def beam_gradient(
+    field: AbstractField,
+    scan: Scan,
+    mount: Mount,
+    heights: Float[ArrayLike, " h"],
+    *,
+    probe: AbstractProbe | None = None,
+) -> Float[Array, "h b 3 3"]:
+    """The velocity gradient along each beam's probe volume, for the first-order change of
+    the LOS when the beam turns about the lidar.
+
+    A beam turned from ``n`` to ``n + dn`` (about the lidar, ``|dn|`` small) moves its
+    quadrature node at range ``r_k`` by ``r_k dn``, so its LOS changes by
+    ``dn . V_bar + rho * n . (G dn)`` at first order, with ``V_bar`` the probe-weighted
+    velocity, ``rho`` the focus range and
+    ``G_ij = sum_k w_k (r_k / rho) dV_i/dx_j (x_k)`` (the probe's weights ``w_k`` after
+    its cut at the lidar, as `simulate` uses them; the point probe: the gradient at the
+    focus). This returns ``G``.
+
+    **Arguments:** as `simulate` (`field`, `scan`, one `mount`, `heights` in m, `probe`;
+    the probe's nodes are chosen for the field by `probe_for_field`, as `simulate` does).
+
+    **Returns:** ``(h, b, 3, 3)`` ``G[h, b, i, j] = dV_i / dx_j`` in the north frame
+    (velocity component ``i`` and position component ``j`` both rotated by
+    `lidarjax.frames.cfd_to_north_rotation`), 1/s. Computed by forward-mode
+    differentiation (`jax.jvp`) of the field's sampling at the nodes, so it is the exact
+    derivative of the field's interpolant (piecewise constant in a trilinear grid cell). NaN
+    where `simulate`'s LOS is NaN.
+    """
+    if isinstance(scan, ScanPattern) or not isinstance(scan, Scan):
+        raise ValueError("beam_gradient: `scan` must be a profiling lidarjax.Scan "
+                         "(lidarjax.windcube_v2(), ...).")
+    probe, heights = _prepared(field, scan, mount, heights, None, probe, "beam_gradient")
+    return _beam_gradient_jit(field, scan, mount, heights, probe)
+
+
+@jax.jit
+def _beam_gradient_jit(field, scan, mount, heights, probe):
+    with jax.default_matmul_precision("highest"):
+        dtype = field.dtype
+        heights = heights.astype(dtype)
+        origin_local = difference(mount.location, mount.location_lo, field.origin,
+                                  field.origin_lo, dtype)
+        angles = jax.tree_util.tree_map(lambda a: jnp.asarray(a).astype(dtype), mount)
+        n_cfd, ranges = profile_geometry(scan, mount, heights)
+        q = cfd_to_north_rotation(angles)
+        return jnp.einsum("ik,hbkl,jl->hbij", q, gradient_along_beams(
+            field, origin_local, n_cfd, ranges, probe), q)
+
+
+def gradient_along_beams(field, origin_local, directions, ranges, probe):
+    """``G`` of `beam_gradient` in the CFD frame, ``(h, b, 3, 3)``, for beams from
+    `origin_local` (m, relative to the field's origin) along CFD unit `directions`
+    ``(b, 3)`` focused at `ranges` ``(h, b)`` (m), with `probe` (its nodes as given; a
+    `lidarjax.GradedProbe` pads every height's nodes to one count with weight 0).
+    Traceable; `lidarjax.ResponseTable.from_simulations` calls it on a run's geometry."""
+
+    def gradient(points):  # (..., 3) -> (..., 3 [velocity], 3 [position])
+        eye = jnp.eye(3, dtype=points.dtype)
+        cols = [jax.jvp(field.sample_local, (points,),
+                        (jnp.broadcast_to(eye[j], points.shape),))[1] for j in range(3)]
+        return jnp.stack(cols, axis=-1)
+
+    focus = gradient(origin_local + ranges[..., None] * directions)  # (h, b, 3, 3)
+    if isinstance(probe, PointProbe):
+        return focus
+    offsets, weights = probe.nodes(ranges)
+    offsets = jnp.broadcast_to(offsets.astype(ranges.dtype), ranges.shape + offsets.shape[-1:])
+    weights = jnp.broadcast_to(weights.astype(ranges.dtype), offsets.shape)
+    node_ranges = ranges[..., None] + offsets  # (h, b, q)
+    g_q = gradient(origin_local + node_ranges[..., None] * directions[:, None, :])
+    ahead, kept, total = _cut(offsets, weights, ranges)
+    g_q = jnp.where(ahead[..., None, None], g_q, 0)  # nodes behind the lidar: NaN
+    lever = kept * node_ranges / ranges[..., None]
+    g = jnp.einsum("hbq,hbqij->hbij", lever, g_q) / jnp.where(
+        total > 0, total, 1)[..., None, None]
+    return jnp.where((total > 0)[..., None, None], g, focus)

@@ -57,8 +57,9 @@ from .response import (
     PeriodicSpline,
     ProfileTable,
     ResponseTable,
-    locate,
     parameter_weights,
+    spline_at,
+    tabulated_start,
 )
 
 __all__ = ["Inversion", "invert", "invert_reconstructed", "default_solver", "JointInversion",
@@ -131,9 +132,7 @@ def _polar(y):
 
 def _row(geom, coefficients, hidx, direction):
     """Spline value ``(b,)`` of height `hidx` at `direction` (degrees, any real)."""
-    k, t = locate(*geom, direction)
-    c = coefficients[:, k, hidx]  # (4, b)
-    return c[0] + t * (c[1] + t * (c[2] + t * c[3]))
+    return spline_at(geom, coefficients, direction, (hidx,))
 
 
 def _residuals(y, args):
@@ -296,11 +295,7 @@ def _solve_batch(los, w, noise, values, knots, geom, coefficients, cfg):
     scale = jax.lax.stop_gradient(jnp.where(scale > 0, scale, 1.0))
     los = los / scale[..., None]
     # Start: best tabulated direction with its closed-form nonnegative speed.
-    a = jnp.einsum("rhb,shb->rhs", w * los, values, precision=HIGHEST)
-    c = jnp.einsum("rhb,shb->rhs", w, values * values, precision=HIGHEST)
-    uk = jnp.where((a > 0) & (c > 0), a / jnp.where(c > 0, c, 1.0), 0.0)
-    k = jnp.argmax(a * uk, axis=-1)
-    u0 = jnp.take_along_axis(uk, k[..., None], axis=-1)[..., 0]
+    k, u0 = tabulated_start(w, los, values, "rhb,shb->rhs", 2)
     hidx = jnp.broadcast_to(jnp.arange(h, dtype=jnp.int32), (r, h))
     flat = lambda x: x.reshape((r * h,) + x.shape[2:])  # noqa: E731
 
@@ -666,9 +661,7 @@ class _JointContext(eqx.Module):
 
 def _joint_shape(ctx: _JointContext, d, a):
     """``profile(z_h, a) * R_hb(d, a)`` ``(h, b)``: LOS per unit reference speed."""
-    k, t = locate(*ctx.geom, d)
-    c = ctx.coefficients[:, k]  # (4, p, h, b)
-    v = c[0] + t * (c[1] + t * (c[2] + t * c[3]))
+    v = spline_at(ctx.geom, ctx.coefficients, d)  # (p, h, b)
     w = parameter_weights(ctx.pknots, ctx.pwidths, ctx.pbasis, a, extrapolate=True)
     r = jnp.einsum("p,phb->hb", w, v, precision=HIGHEST)
     return ctx.profile(ctx.heights, a)[:, None] * r
@@ -775,7 +768,6 @@ def _joint_one(los, w, noise, k, j, u0, scale, ctx, knots, cfg):
 def _joint_batch(los, w, noise, values, knots, ctx, cfg):
     """Records ``(r, h, b)``: dense start over directions x parameters, then one solve per
     record. `values` ``(s, p, h, b)``: tabulated LOS per unit reference speed."""
-    r = los.shape[0]
     usable = (w > 0) & jnp.isfinite(los)
     w = jnp.where(usable, w, 0.0)
     los = jnp.where(usable, los, 0.0)
@@ -790,12 +782,8 @@ def _joint_batch(los, w, noise, values, knots, ctx, cfg):
     scale = peak * jnp.sqrt(jnp.sum(w * x * x, axis=(-2, -1)) / jnp.where(wsum > 0, wsum, 1.0))
     scale = jax.lax.stop_gradient(jnp.where(scale > 0, scale, 1.0))
     los = los / scale[:, None, None]
-    s, p = values.shape[:2]
-    a = jnp.einsum("rhb,sphb->rsp", w * los, values, precision=HIGHEST).reshape(r, s * p)
-    c = jnp.einsum("rhb,sphb->rsp", w, values * values, precision=HIGHEST).reshape(r, s * p)
-    uk = jnp.where((a > 0) & (c > 0), a / jnp.where(c > 0, c, 1.0), 0.0)
-    best = jnp.argmax(a * uk, axis=-1)
-    u0 = jnp.take_along_axis(uk, best[:, None], axis=-1)[:, 0]
+    p = values.shape[1]
+    best, u0 = tabulated_start(w, los, values, "rhb,sphb->rsp", 1)
     k, j = best // p, best % p
 
     def one(los_i, w_i, noise_i, k_i, j_i, u0_i, scale_i):

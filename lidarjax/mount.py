@@ -87,8 +87,10 @@ class Mount(eqx.Module):
         pitch: Float[ArrayLike, "*s"] = 0.0,
         roll: Float[ArrayLike, "*s"] = 0.0,
     ):
+        location = _as_traced_array(location)
         angles = {"beta": beta, "gamma": gamma, "psi": psi, "epsilon": epsilon,
                   "pitch": pitch, "roll": roll}
+        angles = {name: _as_traced_array(val) for name, val in angles.items()}
         shape = np.shape(location)
         if len(shape) not in (1, 2) or shape[-1] != 3:
             raise ValueError(
@@ -159,6 +161,15 @@ class Mount(eqx.Module):
             if not -s <= int(index) < s:
                 raise IndexError(f"Mount: index {int(index)} out of range for {s} mounts.")
         return jax.tree_util.tree_map(lambda x: x[index], self)
+
+
+def _as_traced_array(value):
+    """A number, tuple, list or array holding a tracer (under `jax.grad`, `jax.jit` or
+    `jax.vmap`) as one JAX array, so that shapes and dtypes can be read without converting
+    the tracer to numpy; concrete values and JAX arrays are returned unchanged."""
+    if isinstance(value, jax.Array) or is_concrete(value):
+        return value
+    return jnp.asarray(value)
 
 
 def _leaf(value, n):

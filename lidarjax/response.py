@@ -14,7 +14,10 @@ frame (``+y`` north, ``+x`` east, ``+z`` up):
 - `point`: ``(s, h, 3)`` the velocity on the vertical above the lidar (the centre line);
 - `beam_velocity`: ``(s, h, b, 3)`` the full velocity at the beam points (ZephyCube's scalar
   correction needs the along-pair and vertical components there, not only the LOS);
-- `beam_vectors`: ``(b, 3)`` the beam unit vectors (direction-independent).
+- `beam_vectors`: ``(b, 3)`` the beam unit vectors (direction-independent);
+- `beam_gradient`: ``(s, h, b, 3, 3)`` the velocity gradient along each beam's probe volume
+  (`lidarjax.beam_gradient`), for `lidarjax.calibrate`'s displacement of the measurement
+  points by a tilt or turn.
 
 Directions are meteorological: where the wind comes **from**, degrees clockwise from north.
 
@@ -41,7 +44,7 @@ from scipy.interpolate import CubicSpline
 from ._precision import default_float, is_concrete
 from ._util import compiled
 from .angles import horizontal_speed, wind_direction
-from .forward import Simulation
+from .forward import Simulation, gradient_along_beams, probe_for_field
 from .frames import cfd_to_north_rotation
 from .mount import Mount
 from .probe import AbstractProbe, CWProbe, PointProbe, PulsedProbe
@@ -189,9 +192,46 @@ def locate(start, offsets, widths, uniform: bool, direction):
     return k, (x - offsets[k]) / widths[k]
 
 
-def _cubic(c, t):
+def cubic(c, t, *, slope: bool = False):
+    """``c0 + t (c1 + t (c2 + t c3))`` for coefficients `c` ``(4, *t.shape, ...)`` at `t`
+    (broadcast over `c`'s trailing axes), and with `slope` its derivative in `t` too: the
+    one evaluation of a cubic piece that the direction splines, the profile-parameter
+    weights, `lidarjax.invert`, `invert_joint` and `lidarjax.calibrate` share."""
     t = t.reshape(t.shape + (1,) * (c.ndim - 1 - t.ndim))
-    return c[0] + t * (c[1] + t * (c[2] + t * c[3]))
+    value = c[0] + t * (c[1] + t * (c[2] + t * c[3]))
+    if not slope:
+        return value
+    return value, c[1] + t * (2.0 * c[2] + 3.0 * t * c[3])
+
+
+def spline_at(geom, coefficients, direction, index=(), *, slope: bool = False):
+    """A periodic direction spline's values at `direction` (degrees, any real, shape
+    ``(...)``): `geom` ``(start, offsets, widths, uniform)`` and `coefficients` ``(4, s,
+    ...)`` of a `PeriodicSpline`; `index` picks trailing entries per direction (e.g. the
+    height of each problem). With `slope` also the derivative per degree of direction."""
+    start, offsets, widths, uniform = geom
+    k, t = locate(start, offsets, widths, uniform, direction)
+    c = coefficients[(slice(None), k) + tuple(index)]
+    if not slope:
+        return cubic(c, t)
+    value, dt = cubic(c, t, slope=True)
+    w = widths[k]
+    return value, dt / w.reshape(w.shape + (1,) * (dt.ndim - w.ndim))
+
+
+def tabulated_start(w, los, values, spec: str, lead: int):
+    """The dense start of the inversions: for each problem, the tabulated entry whose
+    closed-form nonnegative speed ``u_k = (sum w los R_k) / (sum w R_k^2)`` fits best, and
+    that speed. ``einsum(spec, w * los, values)`` gives the correlations with `lead` leading
+    problem axes, the rest (flattened) running over the tabulated entries. Returns the
+    entry's flat index and ``u_k`` ``(*lead axes)``."""
+    a = jnp.einsum(spec, w * los, values, precision=jax.lax.Precision.HIGHEST)
+    c = jnp.einsum(spec, w, values * values, precision=jax.lax.Precision.HIGHEST)
+    a = a.reshape(a.shape[:lead] + (-1,))
+    c = c.reshape(c.shape[:lead] + (-1,))
+    uk = jnp.where((a > 0) & (c > 0), a / jnp.where(c > 0, c, 1.0), 0.0)
+    k = jnp.argmax(a * uk, axis=-1)
+    return k, jnp.take_along_axis(uk, k[..., None], axis=-1)[..., 0]
 
 
 class PeriodicSpline(eqx.Module):
@@ -220,7 +260,7 @@ class PeriodicSpline(eqx.Module):
         """Values at `direction` (degrees): shape ``direction.shape + trailing``."""
         direction = jnp.asarray(direction, self.start.dtype)
         k, t = locate(self.start, self.offsets, self.widths, self.uniform, direction)
-        return _cubic(self.coefficients[:, k], t)
+        return cubic(self.coefficients[:, k], t)
 
     @compiled
     def per_row(self, direction: Float[ArrayLike, "... n"]) -> Float[Array, "... n"]:
@@ -234,7 +274,7 @@ class PeriodicSpline(eqx.Module):
                 f"{direction.shape}."
             )
         k, t = locate(self.start, self.offsets, self.widths, self.uniform, direction)
-        return _cubic(self.coefficients[:, k, jnp.arange(n)], t)
+        return cubic(self.coefficients[:, k, jnp.arange(n)], t)
 
     def derivative(self, direction: Float[ArrayLike, ...]) -> Float[Array, ...]:
         """Derivative with respect to direction, per degree: ``direction.shape + trailing``."""
@@ -286,6 +326,12 @@ def _sample_local(field, points):
     return field.sample_local(points)
 
 
+@eqx.filter_jit
+def _gradient_along(field, origin_local, directions, ranges, probe):
+    with jax.default_matmul_precision("highest"):
+        return gradient_along_beams(field, origin_local, directions, ranges, probe)
+
+
 class ResponseTable(eqx.Module):
     """What a lidar measures per unit free-stream speed, tabulated against inflow direction.
 
@@ -303,6 +349,12 @@ class ResponseTable(eqx.Module):
     - `beam_velocity`: optional ``(s, h, b, 3)`` velocity at the beam points per unit speed,
       north frame (ZephyCube's scalar correction).
     - `beam_vectors`: optional ``(b, 3)`` beam unit vectors, north frame.
+    - `beam_gradient`: optional ``(s, h, b, 3, 3)`` velocity gradient along each beam per
+      unit free-stream speed, north frame, 1/m: ``[..., i, j] = dV_i / dx_j`` weighted over
+      the probe volume as `lidarjax.beam_gradient` defines it (the first-order change of
+      the LOS when a beam turns by ``dn`` about the lidar is ``dn . V + rho n . (G dn)``,
+      ``rho`` the focus range). `lidarjax.calibrate` needs it to model how a tilt moves
+      the measurement points; `from_simulations` computes it from the runs' `fields`.
     - `heights`: optional ``(h,)`` measurement heights above the lidar, m.
     - `instrument`: optional `Instrument`, the scan and installation the runs simulated
       (static metadata; `from_simulations` and `lidarjax.build_table` fill it, and
@@ -324,12 +376,14 @@ class ResponseTable(eqx.Module):
     point: Float[Array, "s h 3"] | None
     beam_velocity: Float[Array, "s h b 3"] | None
     beam_vectors: Float[Array, "b 3"] | None
+    beam_gradient: Float[Array, "s h b 3 3"] | None
     heights: Float[Array, " h"] | None
     instrument: Instrument | None = eqx.field(static=True)
     response_spline: PeriodicSpline
     reconstructed_spline: PeriodicSpline | None
     point_spline: PeriodicSpline | None
     beam_velocity_spline: PeriodicSpline | None
+    beam_gradient_spline: PeriodicSpline | None
 
     def __init__(
         self,
@@ -340,6 +394,7 @@ class ResponseTable(eqx.Module):
         point: Float[ArrayLike, "s h 3"] | None = None,
         beam_velocity: Float[ArrayLike, "s h b 3"] | None = None,
         beam_vectors: Float[ArrayLike, "b 3"] | None = None,
+        beam_gradient: Float[ArrayLike, "s h b 3 3"] | None = None,
         heights: Float[ArrayLike, " h"] | None = None,
         instrument: Instrument | None = None,
     ):
@@ -404,6 +459,9 @@ class ResponseTable(eqx.Module):
         self.point, self.point_spline = optional("point", point, (s, h, 3))
         self.beam_velocity, self.beam_velocity_spline = optional(
             "beam_velocity", beam_velocity, (s, h, b, 3)
+        )
+        self.beam_gradient, self.beam_gradient_spline = optional(
+            "beam_gradient", beam_gradient, (s, h, b, 3, 3)
         )
         if beam_vectors is None:
             self.beam_vectors = None
@@ -497,6 +555,7 @@ class ResponseTable(eqx.Module):
         scan: Scan | None = None,
         probe: AbstractProbe | None = None,
         instrument: Instrument | None = None,
+        beam_gradient: Float[ArrayLike, "s h b 3 3"] | None = None,
     ) -> ResponseTable:
         """A table from `lidarjax.simulate` results, one per CFD run (inflow direction).
 
@@ -509,7 +568,14 @@ class ResponseTable(eqx.Module):
           platform by ``beta`` instead of the inflow). Needed for `beam_vectors` (and so the
           centre-line projections of ZephyCube's vector correction) and for `fields`.
         - `fields`: optional sequence of the runs' fields (one per run); the velocity at the
-          beam points is sampled from them for ZephyCube's scalar correction.
+          beam points is sampled from them for ZephyCube's scalar correction, and the
+          velocity gradient along the beams (`beam_gradient`, for `lidarjax.calibrate`) is
+          taken from them by forward-mode differentiation, over `probe`'s volume (its
+          nodes chosen for each field as `simulate` chooses them when `scan` is given).
+        - `beam_gradient`: the runs' `lidarjax.beam_gradient` ``(s, h, b, 3, 3)`` (north
+          frame, 1/s) when they were computed while the fields were loaded (as
+          `lidarjax.build_table` does); divided by the free-stream speed here. Not with
+          `fields`.
         - `scan`, `probe`: the scan and probe the runs used: with them the table knows its
           `Instrument` (cone angle, beams, heights, and the mounts' epsilon and tilt), or give
           `instrument` directly.
@@ -561,7 +627,12 @@ class ResponseTable(eqx.Module):
         response = norm(stacked.los)
         reconstructed = norm(stacked.lidar_velocity)
         point = None if stacked.point_velocity is None else norm(stacked.point_velocity)
-        beam_vectors = beam_velocity = None
+        beam_vectors = beam_velocity = gradient = None
+        if beam_gradient is not None:
+            if fields is not None:
+                raise ValueError("ResponseTable.from_simulations: give `fields` or "
+                                 "`beam_gradient`, not both.")
+            gradient = norm(np.asarray(beam_gradient, np.float64))
         if mount is not None:
             if isinstance(mount, Mount):
                 mounts = list(mount) if mount.batch_shape else [mount] * s
@@ -590,7 +661,7 @@ class ResponseTable(eqx.Module):
                 # to the working dtype: a 0.03-0.5 m grid at UTM coordinates in float32), made
                 # relative to each field's origin before rounding
                 ranges = np.asarray(stacked.ranges, np.float64)  # (s, h, b), tilt-independent
-                vel = []
+                vel, grad = [], []
                 for i, f in enumerate(fields):
                     m = mounts[i]
                     loc = np.asarray(m.location, np.float64) + np.asarray(m.location_lo, np.float64)
@@ -598,8 +669,16 @@ class ResponseTable(eqx.Module):
                     local = (loc - origin) + ranges[i][..., None] * dirs[i][None]
                     vel.append(np.asarray(_sample_local(f, jnp.asarray(local.astype(f.dtype))),
                                           np.float64))
+                    p = PointProbe() if probe is None else probe
+                    if scan is not None:
+                        p = probe_for_field(f, scan, heights[i], p, mount=m,
+                                            caller="ResponseTable.from_simulations")
+                    to_f = lambda a, f=f: jnp.asarray(np.asarray(a).astype(f.dtype))  # noqa: E731
+                    grad.append(np.asarray(_gradient_along(
+                        f, to_f(loc - origin), to_f(dirs[i]), to_f(ranges[i]), p), np.float64))
                 vel = np.stack(vel)
                 beam_velocity = norm(np.einsum("sij,shbj->shbi", rot, vel))
+                gradient = norm(np.einsum("sik,shbkl,sjl->shbij", rot, np.stack(grad), rot))
         elif fields is not None:
             raise ValueError(
                 "ResponseTable.from_simulations: `fields` needs `mount` to rotate the sampled "
@@ -613,6 +692,7 @@ class ResponseTable(eqx.Module):
             point=cast(point),
             beam_velocity=cast(beam_velocity),
             beam_vectors=cast(beam_vectors),
+            beam_gradient=cast(gradient),
             heights=cast(heights[0]),
             instrument=instrument if instrument is not None or scan is None
             else Instrument.of(scan, mount, heights[0], probe),
@@ -719,10 +799,7 @@ def parameter_weights(knots, widths, basis, parameter, *, extrapolate: bool = Fa
     k = jnp.clip(k, 0, n - 2)
     t = (parameter - knots[k]) / widths[k]
     tc = jnp.clip(t, 0.0, 1.0)
-    c = basis[:, k]  # (4, ..., P)
-    tt = tc[..., None]
-    value = c[0] + tt * (c[1] + tt * (c[2] + tt * c[3]))
-    slope = c[1] + tt * (2.0 * c[2] + 3.0 * tt * c[3])
+    value, slope = cubic(basis[:, k], tc, slope=True)  # (..., P)
     w = value + (t - tc)[..., None] * slope
     if not extrapolate:
         w = jnp.where(((t >= 0) & (t <= 1))[..., None], w, jnp.nan)
@@ -795,7 +872,8 @@ class ProfileTable(eqx.Module):
             if not np.array_equal(np.asarray(t.valid), np.asarray(t0.valid)):
                 raise ValueError(f"ProfileTable: the table for {name} = {p[i]:g} misses other "
                                  "beams than the first; drop those beams from every table.")
-            for attr in ("reconstructed", "point", "beam_velocity", "beam_vectors", "heights"):
+            for attr in ("reconstructed", "point", "beam_velocity", "beam_vectors",
+                         "beam_gradient", "heights"):
                 if (getattr(t, attr) is None) != (getattr(t0, attr) is None):
                     raise ValueError(f"ProfileTable: `{attr}` is in some tables and not in "
                                      "others; build them alike.")
@@ -933,6 +1011,7 @@ def _scaled_table(t: ResponseTable, factor: np.ndarray) -> ResponseTable:
     return ResponseTable(np.asarray(t.directions), sc(t.response, 3),
                          reconstructed=sc(t.reconstructed, 3), point=sc(t.point, 3),
                          beam_velocity=sc(t.beam_velocity, 4),
+                         beam_gradient=sc(t.beam_gradient, 5),
                          beam_vectors=None if t.beam_vectors is None else np.asarray(
                              t.beam_vectors),
                          heights=None if t.heights is None else np.asarray(t.heights),
@@ -952,7 +1031,7 @@ def _combined(tables: Sequence[ResponseTable], w: np.ndarray) -> ResponseTable:
 
     return ResponseTable(np.asarray(t0.directions), mix("response"),
                          reconstructed=mix("reconstructed"), point=mix("point"),
-                         beam_velocity=mix("beam_velocity"),
+                         beam_velocity=mix("beam_velocity"), beam_gradient=mix("beam_gradient"),
                          beam_vectors=None if t0.beam_vectors is None else np.asarray(
                              t0.beam_vectors),
                          heights=None if t0.heights is None else np.asarray(t0.heights),

@@ -55,6 +55,11 @@ def register(sub) -> None:
                           "direction_deg (time as in the records, end of interval, UTC)")
     cal.add_argument("--wrt", type=_wrt, default=CALIBRATION_PARAMETERS,
                      help="offsets to estimate (default epsilon,pitch,roll)")
+    cal.add_argument("--north-offset", choices=("instrument", "site"), default="instrument",
+                     help="what a north offset is: 'instrument' (default) the instrument turned "
+                          "on its site (its beams and measurement points turn, the flow stays), "
+                          "'site' the flow turns with it (a platform that distorts the flow "
+                          "shares its heading error); see lidarjax.calibrate")
     cal.add_argument("--period", default="10min",
                      help="averaging interval of the raw records (default 10min; shorter "
                           "intervals give more records from a short file)")
@@ -146,9 +151,11 @@ def run(args) -> int:
     # what calibrate reads: the LOS and the header's tilt
     recs = SimpleNamespace(los=los, pitch=header.get("pitch", math.nan),
                            roll=header.get("roll", math.nan))
-    result = calibrate(recs, sub, wrt=args.wrt, reference=reference)
-    print(f"calibration from {result.n_records} records x {sub.n_heights} heights "
-          f"({result.n_problems} record-heights used); LOS residual {float(result.noise):.3f} m/s")
+    result = calibrate(recs, sub, wrt=args.wrt, reference=reference,
+                       north_offset=args.north_offset)
+    print(f"calibration from {int(result.n_records)} records x {sub.n_heights} heights "
+          f"({int(result.n_problems)} record-heights used); LOS residual "
+          f"{float(result.noise):.3f} m/s")
     for line in result.summary():
         print(line)
     if header:
@@ -167,8 +174,10 @@ def run(args) -> int:
             "correlation": np.asarray(result.correlation).tolist(),
             "identifiable": [bool(v) for v in np.asarray(result.identifiable)],
             "header_deg": [float(v) for v in np.asarray(result.header)],
-            "n_records": result.n_records, "n_problems": result.n_problems,
+            "n_records": int(result.n_records), "n_problems": int(result.n_problems),
             "noise_m_s": float(result.noise), "converged": result.converged,
+            "flags": int(result.flags), "passes": int(result.num_steps),
+            "north_offset": args.north_offset,
             "notes": list(result.notes),
         }
         with atomic_path(Path(args.out)) as tmp:

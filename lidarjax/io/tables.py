@@ -2,7 +2,8 @@
 
 A table file holds the arrays a `lidarjax.ResponseTable` is built from (directions in
 meteorological degrees, LOS per unit free-stream speed, and the optional reconstructed,
-point and beam responses, beam vectors and heights), plus a JSON metadata dictionary (scan,
+point and beam responses, beam vectors, the velocity gradient along the beams
+(``beam_gradient``, for `lidarjax.calibrate`) and heights), plus a JSON metadata dictionary (scan,
 mount angles, probe, source files). The spline coefficients are refitted on load, so a file
 is independent of the lidarjax version that wrote it.
 
@@ -31,8 +32,9 @@ __all__ = ["save_table", "load_table", "TABLE_FORMAT", "PROFILE_TABLE_FORMAT"]
 
 TABLE_FORMAT = "lidarjax-response-table-1"
 PROFILE_TABLE_FORMAT = "lidarjax-profile-table-1"
-_OPTIONAL = ("reconstructed", "point", "beam_velocity", "beam_vectors", "heights")
-_PER_PROFILE = ("response", "reconstructed", "point", "beam_velocity")
+_OPTIONAL = ("reconstructed", "point", "beam_velocity", "beam_vectors", "beam_gradient",
+             "heights")
+_PER_PROFILE = ("response", "reconstructed", "point", "beam_velocity", "beam_gradient")
 
 
 def save_table(path: PathLike, table, metadata: dict[str, Any] | None = None) -> Path:

@@ -239,7 +239,7 @@ def subset_table(table, index):
     return ResponseTable(
         np.asarray(table.directions), take(table.response),
         reconstructed=take(table.reconstructed), point=take(table.point),
-        beam_velocity=take(table.beam_velocity),
+        beam_velocity=take(table.beam_velocity), beam_gradient=take(table.beam_gradient),
         beam_vectors=None if table.beam_vectors is None else np.asarray(table.beam_vectors),
         heights=take(table.heights, axis=0),
         instrument=None if table.instrument is None else dataclasses.replace(

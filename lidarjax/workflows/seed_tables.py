@@ -22,7 +22,7 @@ from ..angles import horizontal_speed, seed_azimuth
 from ..batch import simulate_rotations, stack_fields
 from ..field import GridField, IndexedPoints
 from ..footprint import scan_bounds
-from ..forward import Simulation, probe_for_field, simulate
+from ..forward import Simulation, beam_gradient, probe_for_field, simulate
 from ..io import simulate_points
 from ..io.settings import Settings
 from ..mount import Mount
@@ -216,7 +216,9 @@ def build_table(
     """A `lidarjax.ResponseTable` from the CFD runs of a seed settings file.
 
     Each platform rotation ``beta`` is one inflow direction; the table's directions are the
-    free streams' meteorological directions in the north frame. Returns ``(table, sims)``.
+    free streams' meteorological directions in the north frame. The table carries the
+    velocity gradient along the beams (`lidarjax.beam_gradient`, taken while each run is
+    loaded) for `lidarjax.calibrate`. Returns ``(table, sims)``.
 
     Runs are loaded **one at a time**: each `GridField` returned by `field_for_beta` is cut
     at once to `scan_bounds` of all mounts (with the probe; `GridField.crop`, bit-exact),
@@ -267,6 +269,7 @@ def build_table(
     tasks = [(b, m) for b, m in zip(betas, mounts, strict=True)]
     run = _TableRun(field_for_beta, scan, heights, u_ref, probe, lo, hi)
     sims: dict[float, Simulation] = {}
+    gradients: dict[float, np.ndarray] = {}
 
     meter = progress_meter(progress, LineProgress)
     bar = meter.start(len(betas), "table", unit="run")
@@ -274,6 +277,7 @@ def build_table(
     def report(k, result):
         b, sim, info = result
         sims[b] = sim
+        gradients[b] = info["gradient"]
         meter.update(bar, k, f"beta {b:g}: grid {info['shape']} -> crop {info['crop']} in "
                              f"{info['seconds']:.1f} s")
 
@@ -294,8 +298,9 @@ def build_table(
                 "client.run(jax.config.update, 'jax_enable_x64', True)")
     meter.close(bar)
     sims = {b: sims[b] for b in betas}
-    table = ResponseTable.from_simulations(list(sims.values()), mount=mounts, scan=scan,
-                                           probe=probe)
+    table = ResponseTable.from_simulations(
+        list(sims.values()), mount=mounts, scan=scan, probe=probe,
+        beam_gradient=np.stack([gradients[b] for b in betas]))
     return table, sims
 
 
@@ -343,6 +348,10 @@ class _TableRun:
         crop = getattr(getattr(field, "grid", field), "shape", None)
         sim = simulate(field, self.scan, mount, jnp.asarray(self.heights), u_ref=self.u_ref,
                        probe=self.probe)
+        # the velocity gradient along the beams, while the run is loaded (lidarjax.calibrate)
+        gradient = np.asarray(beam_gradient(field, self.scan, mount, jnp.asarray(self.heights),
+                                            probe=self.probe))
         del field
         sim = jax.tree_util.tree_map(np.asarray, sim)
-        return beta, sim, {"shape": shape, "crop": crop, "seconds": time.perf_counter() - t0}
+        return beta, sim, {"shape": shape, "crop": crop, "seconds": time.perf_counter() - t0,
+                           "gradient": gradient}

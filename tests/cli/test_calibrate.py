@@ -140,7 +140,8 @@ def test_calibrate_cli_finds_a_north_offset_with_a_reference(case, capsys):
     n, de = 60, 2.5
     h = np.asarray(table.heights)
     u, d = rng.uniform(5, 12, n), rng.uniform(0, 360, n)
-    # the instrument's north is off by de: the table sees every direction at d - de
+    # the instrument's north is off by de with the platform it stands on (the flow turns
+    # with it, --north-offset site): the table sees every direction at d - de
     los = u[:, None, None] * np.asarray(table.response_at(d - de))
     los = los + 0.02 * rng.standard_normal(los.shape)
     times = _write_rtd(case / "c.rtd", los, h)
@@ -151,9 +152,13 @@ def test_calibrate_cli_finds_a_north_offset_with_a_reference(case, capsys):
     out = case / "cal.json"
     assert main(["calibrate", "--table", str(case / "plain.npz"), "--records",
                  str(case / "c.rtd"), "--reference", str(case / "ref.csv"), "--wrt", "epsilon",
-                 "--min-availability", "0", "--out", str(out)]) == 0
+                 "--north-offset", "site", "--min-availability", "0", "--out", str(out)]) == 0
     doc = json.loads(out.read_text())
-    assert doc["names"] == ["epsilon"] and doc["n_records"] == n
+    assert doc["names"] == ["epsilon"] and doc["n_records"] == n and doc["flags"] == 0
+    # `lidarjax table` wrote the velocity gradient along the beams: no warning, the model's
+    # order stated
+    assert lj.io.load_table(case / "plain.npz").beam_gradient is not None
+    assert any("beam_gradient" in x and "first order" in x for x in doc["notes"])
     assert abs(doc["offset_deg"][0] - de) < 3 * doc["std_deg"][0] + 1e-3
     assert doc["std_deg"][0] < 0.2
     np.testing.assert_allclose(doc["value_deg"][0], 21.0 + doc["offset_deg"][0])
@@ -170,10 +175,11 @@ def test_calibrate_cli_on_the_real_rtd_reports_against_the_header(tmp_path, caps
     rec = lj.load_records(path, min_availability=0)
     scan = lj.windcube_v2(28.0)
     mount = lj.Mount([0.0, 0.0, 0.0])
-    sims = [lj.simulate(lj.scenes.uniform(10.0, d), scan, mount, rec.heights,
-                        u_ref=10.0 * np.asarray(lj.heading(d))) for d in range(0, 360, 30)]
-    lj.io.save_table(tmp_path / "flat.npz",
-                     lj.ResponseTable.from_simulations(sims, mount=mount, scan=scan))
+    fields = [lj.scenes.uniform(10.0, d) for d in range(0, 360, 30)]
+    sims = [lj.simulate(f, scan, mount, rec.heights, u_ref=10.0 * np.asarray(lj.heading(d)))
+            for f, d in zip(fields, range(0, 360, 30), strict=True)]
+    lj.io.save_table(tmp_path / "flat.npz", lj.ResponseTable.from_simulations(
+        sims, mount=mount, scan=scan, fields=fields))
     assert main(["calibrate", "--table", str(tmp_path / "flat.npz"), "--records", str(path),
                  "--wrt", "pitch,roll", "--period", "1min", "--min-availability", "0"]) == 0
     out = capsys.readouterr().out

@@ -354,3 +354,52 @@ def test_batched_mount_inside_transformations():
     assert shapes == [()]
     with pytest.raises(ValueError, match="batch sizes differ"):
         jax.jit(lambda b: lj.Mount(jnp.zeros((3, 3)), beta=b).beta)(jnp.ones(2))
+
+
+_FORMS = {
+    # how a traced scalar x reaches the argument: (location form, angle form)
+    "number": (None, lambda x: x),
+    "tuple": (lambda x: (x, 1.3, 0.7), lambda x: (x, 2.0)),
+    "list": (lambda x: [x, 1.3, 0.7], lambda x: [x, 2.0]),
+    "array": (lambda x: jnp.stack([x, 1.3, 0.7]), lambda x: jnp.stack([x, 2.0])),
+}
+_ARGS = ("location", "beta", "gamma", "psi", "epsilon", "pitch", "roll")
+
+
+def _traced_mount(arg, form, x):
+    """A Mount whose `arg` holds `x` in `form` (a location is never one number)."""
+    loc_form, angle_form = _FORMS[form]
+    if arg == "location":
+        return lj.Mount(location=loc_form(x))
+    return lj.Mount(location=(1.0, 1.3, 0.7), **{arg: angle_form(x)})
+
+
+def _beam_sum(mount):
+    """A scalar that depends on every argument: the first mount's S0 beam (body ``+y``
+    tilted, turned and shifted) summed with the software north rotation."""
+    m = mount[0] if mount.batch_shape else mount
+    from lidarjax.frames import body_to_cfd_rotation, lidar_to_north_rotation
+    beam = body_to_cfd_rotation(m) @ jnp.array([0.0, 0.5, 0.8]) + m.location
+    return jnp.sum(beam) + jnp.sum(lidar_to_north_rotation(m)[0])
+
+
+@pytest.mark.parametrize(("arg", "form"), [(a, f) for a in _ARGS for f in _FORMS
+                                           if (a, f) != ("location", "number")])
+def test_every_argument_accepts_tracers_under_grad_jit_vmap(arg, form):
+    """Issue 29: ``jax.grad`` through ``Mount(location=(x, 1.3, 0.7))`` raised
+    TracerArrayConversionError. Each argument, given a traced scalar as a number, inside a
+    tuple or list, or as an array, works under grad (against central differences), jit
+    (against the concrete mount) and vmap (against a loop)."""
+    f = lambda x: _beam_sum(_traced_mount(arg, form, x))  # noqa: E731
+    x0, h = 1.7, 1e-5
+    fd = (f(x0 + h) - f(x0 - h)) / (2 * h)
+    g = jax.grad(f)(x0)
+    np.testing.assert_allclose(g, fd, rtol=1e-7, atol=1e-9)
+    assert float(jnp.abs(g)) > 1e-3  # the argument really reaches the scalar
+    concrete = _traced_mount(arg, form, x0)
+    jitted = jax.jit(lambda x: _traced_mount(arg, form, x))(jnp.asarray(x0))
+    for a, b in zip(jax.tree_util.tree_leaves(jitted), jax.tree_util.tree_leaves(concrete),
+                    strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-15, atol=0)
+    xs = jnp.array([0.3, -2.0, 5.0])
+    np.testing.assert_allclose(jax.vmap(f)(xs), [f(float(x)) for x in xs], rtol=1e-13)
