@@ -22,6 +22,7 @@ NaN last.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -973,10 +974,15 @@ class FieldSequence:
       at most once per window for each snapshot the window lacks.
     - `max_snapshots`: the most snapshots one window holds (at least 2); default 8.
     - `name`: what error messages call the sequence (a path).
+    - `assemble`: ``assemble(times, snapshots) -> AbstractField``, the field of one window
+      from what `load` returned for its snapshots (default `SnapshotField`, `load` then
+      returning `GridField`\\ s); a reader that prepares more than a grid per snapshot (the
+      exact cellPoint values at the points a run samples, `lidarjax.io.load_field_sequence`'s
+      `exact_at`) gives its own.
     """
 
-    def __init__(self, times, load: Callable[[int], GridField], *, max_snapshots: int = 8,
-                 name: str = "FieldSequence"):
+    def __init__(self, times, load: Callable[[int], Any], *, max_snapshots: int = 8,
+                 name: str = "FieldSequence", assemble: Callable[..., Any] | None = None):
         t = np.asarray(times, np.float64)
         if t.ndim != 1 or t.size < 2 or not np.all(np.isfinite(t)):
             raise ValueError(f"{name}: needs at least two finite snapshot times (s), got "
@@ -991,7 +997,8 @@ class FieldSequence:
         self.name = name
         self.max_snapshots = int(max_snapshots)
         self._load = load
-        self._loaded: dict[int, GridField] = {}
+        self._assemble = assemble
+        self._loaded: dict[int, Any] = {}
 
     def __len__(self) -> int:
         return int(self.times.size)
@@ -1019,12 +1026,14 @@ class FieldSequence:
         if k in self._loaded:
             return self._loaded[k]
         f = self._load(k)
+        if self._assemble is not None:
+            return f
         if not isinstance(f, GridField) or f.velocity.ndim != 4:
             raise ValueError(f"{self.name}: snapshot {k} (t = {self.times[k]:g} s) loaded as a "
                              f"{type(f).__name__}, not a lidarjax.GridField.")
         return f
 
-    def window(self, first: int, last: int, *, base: float = 0.0) -> SnapshotField:
+    def window(self, first: int, last: int, *, base: float = 0.0) -> AbstractField:
         """Snapshots ``first..last`` (inclusive, at most `max_snapshots`) as one
         `SnapshotField` whose times are relative to `base` seconds (reduced in float64, so a
         float32 window resolves its own times finely however late in the run); the
@@ -1037,6 +1046,7 @@ class FieldSequence:
         fields = {k: self.snapshot(k) for k in range(first, last + 1)}
         self._loaded = fields
         try:
-            return SnapshotField(self.times[first:last + 1] - float(base), list(fields.values()))
+            make = SnapshotField if self._assemble is None else self._assemble
+            return make(self.times[first:last + 1] - float(base), list(fields.values()))
         except ValueError as e:
             raise ValueError(f"{self.name}: {e}") from None

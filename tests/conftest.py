@@ -106,6 +106,8 @@ SLOW_FILES = {
     "tests/cli/test_cli.py": 13,
     "tests/workflows/test_sensitivity_report.py": 13,
     "tests/io/test_cellpoint_field.py": 12,
+    "tests/io/test_openfoam_table.py": 40,
+    "tests/io/test_snapshots.py": 30,
 }
 
 

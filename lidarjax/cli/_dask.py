@@ -63,16 +63,22 @@ def dask_client(args):
 
 class _RegionLoader:
     """``beta -> GridField``: `load` of that beta's file, reading only `region` where the
-    reader supports it (a plain class so Dask can ship it)."""
+    reader supports it, exact at the points a run prepares (``exact_at``) where it supports
+    that (a plain class so Dask can ship it)."""
 
     def __init__(self, load, paths, region):
         self.load, self.paths, self.region = load, dict(paths), region
-        self.takes_region = "region" in inspect.signature(load).parameters
+        params = inspect.signature(load).parameters
+        self.takes_region = "region" in params
+        self.takes_exact = "exact_at" in params
 
-    def __call__(self, beta):
-        if self.takes_region:
-            return self.load(self.paths[beta], region=self.region)
-        return self.load(self.paths[beta])
+    def __call__(self, beta, exact_at=None):
+        """The run of `beta`; with `exact_at` (points, or a function of the resampled grid
+        returning them) a mesh is made exact there (`lidarjax.io.load_field`)."""
+        kw = {"region": self.region} if self.takes_region else {}
+        if exact_at is not None and self.takes_exact:
+            kw["exact_at"] = exact_at
+        return self.load(self.paths[beta], **kw)
 
 
 def region_loader(load, paths, region):

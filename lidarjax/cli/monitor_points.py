@@ -16,11 +16,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+import types
 from pathlib import Path
 
 import numpy as np
 
+from ..forward import probe_for_field
 from ..io import read_settings
+from ..io.fields import check_field_file, load_field
 from ..io.monitor_points import (
     read_monitor_values_csv,
     read_openfoam_probes,
@@ -30,9 +33,10 @@ from ..io.monitor_points import (
 )
 from ..workflows.monitor_points import monitor_points, simulate_from_monitor_points
 from ..workflows.seed_results import write_seed_results
-from ..workflows.seed_tables import settings_mount
+from ..workflows.seed_tables import settings_mount, table_region
 from ._common import (
     add_probe_arguments,
+    field_paths,
     finite_float,
     make_probe,
     make_scan,
@@ -85,6 +89,15 @@ def register(sub) -> None:
                     help="heights above the lidar, metres, 'h1,h2,...' (default: the "
                          "settings' j * height / nh)")
     add_probe_arguments(pr)
+    nodes = pr.add_mutually_exclusive_group()
+    nodes.add_argument("--field", default=None, metavar="CFD",
+                       help="the CFD run(s) `lidarjax simulate --field` would read ('{beta}' "
+                            "for several betas): the probe's nodes are chosen for its "
+                            "resolution as simulate chooses them, so both routes sample the "
+                            "same nodes")
+    nodes.add_argument("--resolution", type=positive_float, default=None, metavar="M",
+                       help="the CFD grid's resolution in metres (what simulate reports as the "
+                            "field's spacing): the nodes simulate would choose for it")
     pr.add_argument("--name", default="lidarProbes",
                     help="function-object name and file stem (default lidarProbes)")
     pr.add_argument("--frequency", type=positive_int, default=100,
@@ -107,10 +120,52 @@ def _configuration(args):
         settings.location(b)  # a ValueError naming the missing row
     heights = np.asarray(args.heights if args.heights is not None else settings.heights())
     scan = make_scan(args.scan, args.cone_angle)
-    probe = make_probe(args)
+    probe = _simulate_nodes(args, settings, betas, heights, scan, make_probe(args))
     mounts = settings_mount(settings, betas)
     locs = monitor_points(scan, mounts, heights, probe)
     return settings, betas, heights, scan, probe, mounts, locs
+
+
+def _simulate_nodes(args, settings, betas, heights, scan, probe):
+    """The probe with the nodes `lidarjax simulate` uses: chosen for --field's (or
+    --resolution's) grid as simulate chooses them (`probe_for_field`, each beta's run read
+    over the region simulate reads), or the probe as given (a note on stderr where simulate
+    would choose others)."""
+    if args.field is None and args.resolution is None:
+        if probe is not None and getattr(probe, "auto_nodes", False):
+            print(f"monitor-points: the {args.probe} probe's default {probe.n_nodes} nodes; "
+                  "`lidarjax simulate` chooses nodes for the CFD field's resolution: add --field "
+                  "CFD (or --resolution M) to write the same nodes", file=sys.stderr)
+        return probe
+    if probe is None:
+        raise ValueError(f"--{'field' if args.field else 'resolution'} chooses the nodes of a "
+                         "probe volume; add --probe pulsed or --probe cw")
+    if args.probe_nodes is not None:
+        raise ValueError("--probe-nodes fixes the node count; drop it or drop --field/--resolution")
+    mounts = settings_mount(settings, betas)
+    if args.resolution is not None:  # one spacing everywhere: one count (no mount needed)
+        chosen = {b: probe_for_field(types.SimpleNamespace(resolution=args.resolution), scan,
+                                     heights, probe, caller="monitor-points") for b in betas}
+    else:
+        paths = field_paths(args, betas)
+        for path in paths.values():
+            check_field_file(path)
+        chosen = {}
+        for k, b in enumerate(betas):  # each run over the region `lidarjax simulate` reads
+            region = table_region(settings, [b], scan, probe=probe)
+            grid = load_field(paths[b], region=region)
+            chosen[b] = probe_for_field(grid, scan, heights, probe, mount=mounts[k],
+                                        caller="monitor-points")
+    counts = {b: tuple(getattr(p, "node_counts", (p.n_nodes,))) for b, p in chosen.items()}
+    if len(set(counts.values())) > 1:
+        listed = ", ".join(f"beta {b:g}: {'/'.join(map(str, n))}" for b, n in counts.items())
+        raise ValueError(f"the runs' grids give different node counts ({listed}); write the "
+                         "monitor points of one beta at a time (--beta)")
+    used = chosen[betas[0]]
+    shown = " ".join(str(n) for n in counts[betas[0]])
+    print(f"probe nodes per beam: {shown} (chosen for the CFD field's resolution, as "
+          "`lidarjax simulate` chooses them)", file=sys.stderr)
+    return used
 
 
 def run(args) -> int:
@@ -144,10 +199,28 @@ def _read(args) -> int:
     if src.is_file() and src.suffix.lower() == ".csv":
         values = read_monitor_values_csv(src)
     else:
-        values = read_openfoam_probes(src, field="U").values_for(locs, time=args.time)
+        probes = read_openfoam_probes(src, field="U")
+        held = int(probes.indices.max()) + 1 if probes.indices.size else 0
+        if held != len(locs):
+            raise ValueError(_count_mismatch(src, held, locs, probe, len(betas), heights, scan))
+        values = probes.values_for(locs, time=args.time)
     sims = simulate_from_monitor_points(locs, values, scan, mounts, heights, probe=probe,
                                 u_ref=args.u_ref)
     write_seed_results(args.out, settings, dict(zip(betas, sims, strict=True)),
                        scan=args.scan, u_ref=args.u_ref, sources=str(src),
                        settings_file=args.settings, log=print)
     return 0
+
+
+def _count_mismatch(src, held, locs, probe, n_mounts, heights, scan) -> str:
+    """The one-line error for samples of another number of points than these options give,
+    with the node count the file implies where it implies one."""
+    per = n_mounts * len(heights)
+    nodes = "focus points" if probe is None else f"{probe.n_nodes} nodes per beam"
+    beams = int(scan.n_beams)
+    spare = held - per  # the column above each lidar: one point per mount and height
+    hint = "write and sample the nodes `lidarjax simulate` uses (--field CFD or --resolution M)"
+    if spare > 0 and spare % (per * beams) == 0:
+        hint = f"it was written with --probe-nodes {spare // (per * beams)}; give the same, or {hint}"
+    return (f"--sampled {src}: holds {held} probes but these options give {len(locs)} "
+            f"({nodes}); {hint}")

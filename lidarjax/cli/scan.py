@@ -17,7 +17,7 @@ from ..io import write_scan_netcdf
 from ..io.fields import check_field_file, load_field
 from ..mount import Mount
 from ..probe import PointProbe
-from ..scanning import instrument_probe, simulate_scan, simulate_scan_series
+from ..scanning import instrument_probe, scan_points, simulate_scan, simulate_scan_series
 from ..scenes import uniform
 from ._common import check_output_file, finite_float, positive_int
 from ._scanning import (
@@ -28,6 +28,7 @@ from ._scanning import (
     measured_los,
     plot_scan,
     read_scan_source,
+    scan_region,
 )
 
 __all__ = ["PRESETS", "make_pattern", "plot_scan", "register", "run"]
@@ -86,14 +87,17 @@ def run(args) -> int:
     out = check_output_file(args.out, inputs=inputs)
     plot = check_output_file(args.plot, inputs=inputs, option="--plot") if args.plot else None
     pattern, gate, scan_file = read_scan_source(args, with_file=True)
-    if args.field:
-        check_field_file(args.field)
-        field = load_field(args.field)
-    else:
-        field = uniform(*args.wind)
     probe = PointProbe() if args.point_probe else instrument_probe(
         args.instrument or "halo_streamline", gate_length=gate)
     mount = Mount(args.location, beta=args.beta, pitch=args.pitch, roll=args.roll)
+    if args.field:
+        check_field_file(args.field)
+        # an OpenFOAM or VTK mesh: read over the scan's region and exact (its own cellPoint)
+        # at every node the scan samples, as `lidarjax simulate --scan`
+        field = load_field(args.field, region=scan_region(pattern, mount, probe),
+                           exact_at=lambda grid: scan_points(grid, pattern, mount, probe))
+    else:
+        field = uniform(*args.wind)
     if args.scans > 1:
         res = simulate_scan_series(field, pattern, mount, n_scans=args.scans, probe=probe)
     else:

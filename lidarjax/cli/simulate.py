@@ -16,11 +16,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-import jax.numpy as jnp
-
 from .._util import format_number
-from ..forward import probe_for_field
-from ..io import read_settings, simulate_points, write_scan_netcdf
+from ..io import read_settings, write_scan_netcdf
 from ..io.fields import check_field_file, load_field
 from ..probe import PulsedProbe
 from ..scanning import scan_points, simulate_scan
@@ -110,24 +107,17 @@ def run(args) -> int:
     for path in paths.values():  # every file's format checked before computing
         check_field_file(path)
 
-    heights = jnp.asarray(settings.heights())
-
-    def field_for(b):
+    def field_for(b, exact_at=None):
         # each run read only where its beams look, as `lidarjax table` reads it (a GridField
         # crop is bit-exact; an OpenFOAM or VTK mesh is resampled over that region only and
         # made exact, the mesh's own cellPoint, at the very points simulate samples: the
-        # probe's nodes, chosen for the grid's resolution, of this beta's mount)
+        # probe's nodes, chosen for the grid's resolution, of this beta's mount, given by
+        # `simulate_settings` as `exact_at`)
         region = table_region(settings, [b], scan, probe=probe, pitch=args.pitch, roll=args.roll)
-        mount = settings_mount(settings, [b], pitch=args.pitch, roll=args.roll)[0]
-
-        def points(grid):
-            used = (probe_for_field(grid, scan, heights, probe, mount=mount, caller="simulate")
-                    if probe else None)
-            if used is not None:
-                nodes[b] = getattr(used, "node_counts", (used.n_nodes,))
-            return simulate_points(scan, mount, heights, used)
-
-        field = load_field(paths[b], region=region, exact_at=points)
+        field = load_field(paths[b], region=region, exact_at=exact_at)
+        used = getattr(exact_at, "probe", None)
+        if used is not None:
+            nodes[b] = getattr(used, "node_counts", (used.n_nodes,))
         fields[b] = getattr(field, "grid", field)  # the grid explains NaNs by its extent
         return field
 

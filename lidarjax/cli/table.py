@@ -124,8 +124,8 @@ class _ProfileLoader:
     def __init__(self, loaders):
         self.loaders = loaders
 
-    def __call__(self, beta, value):
-        return self.loaders[value](beta)
+    def __call__(self, beta, value, exact_at=None):
+        return self.loaders[value](beta, exact_at=exact_at)
 
 
 def _tilt_from(args, rec) -> None:

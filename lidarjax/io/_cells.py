@@ -30,6 +30,7 @@ import dataclasses
 import functools
 
 import numpy as np
+from scipy import sparse
 from scipy.spatial import cKDTree
 
 __all__: list[str] = []
@@ -484,6 +485,67 @@ class PointValues:
         pval = vsum / np.where(self.wsum > 0, self.wsum, 1.0)[:, None]
         pval[self.wsum <= 0] = np.nan
         return cv[self.sub_cells], pval
+
+    def vertex_values(self, sampler: CellPointSampler, tets: np.ndarray) -> VertexValues:
+        """The recipe that gives the vertex values `(n, 4, 3)` of the tetrahedra `tets` (of
+        `sampler`, built with this recipe; -1: in no cell) from any field on the mesh, as
+        two sparse matrices: one over the mesh's cell values, one over the boundary face
+        values those vertices use. Built once per mesh and point set; a snapshot then costs
+        a sparse matrix product (`VertexValues.__call__`)."""
+        tets = np.asarray(tets, np.int64).reshape(-1)
+        n = tets.size
+        nc = self.mesh.n_cells
+        npts = self.wsum.size
+        inv = np.where(self.wsum > 0, 1.0 / np.where(self.wsum > 0, self.wsum, 1.0), 0.0)
+        # point rows: volPointInterpolation's weights, normalised
+        p_cell = sparse.csr_matrix(
+            (self.pair_weight * inv[self.pair_point],
+             (self.pair_point, self.ring_cells[self.pair_cell])), shape=(npts, nc))
+        p_face = sparse.csr_matrix(
+            (self.patch_weight * inv[self.patch_point], (self.patch_point, self.patch_face)),
+            shape=(npts, self.bfaces.size))
+        found = tets >= 0
+        t = np.where(found, tets, 0)
+        cells = self.ring_cells[self.sub_cells[sampler.tet_cell[t]]]  # global cell numbers
+        pts = sampler.tet_pts[t]  # (n, 3) sampler point numbers
+        found &= (self.wsum[pts] > 0).all(axis=1)
+        rows = np.arange(4 * n).reshape(n, 4)
+        ok = np.flatnonzero(found)
+        select = sparse.csr_matrix(
+            (np.ones(3 * ok.size), (rows[ok, 1:].reshape(-1), pts[ok].reshape(-1))),
+            shape=(4 * n, npts))
+        centre = sparse.csr_matrix((np.ones(ok.size), (rows[ok, 0], cells[ok])), shape=(4 * n, nc))
+        cell_m = (centre + select @ p_cell).tocsr()
+        face_m = (select @ p_face).tocsc()
+        used = np.flatnonzero(np.diff(face_m.indptr) > 0)
+        return VertexValues(mesh=self.mesh, cell=cell_m, face=face_m[:, used].tocsr(),
+                            faces=self.bfaces[used], face_area=self.bface_area[used], found=found)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class VertexValues:
+    """Vertex values `(n, 4, 3)` (cell centre, base, A, B) of located tetrahedra from a
+    field on the mesh (`PointValues.vertex_values`): ``cell @ cell_value + face @
+    face_values``, the face values of `faces` (boundary faces, with their area vectors
+    `face_area`) by `boundary_face_values`; NaN rows where `found` is False."""
+
+    mesh: PolyMesh
+    cell: sparse.csr_matrix
+    face: sparse.csr_matrix
+    faces: np.ndarray
+    face_area: np.ndarray
+    found: np.ndarray
+
+    def __call__(self, cell_value: np.ndarray, boundary: BoundaryValues) -> np.ndarray:
+        cell_value = np.asarray(cell_value, np.float64)
+        out = self.cell @ cell_value
+        if self.faces.size:
+            bvals, _ = boundary_face_values(self.mesh, self.faces, self.face_area,
+                                            cell_value[self.mesh.owner[self.faces]], boundary)
+            out += self.face @ bvals
+        out = out.reshape(-1, 4, 3)
+        out[~self.found] = np.nan
+        return out
 
 
 def build_sampler(

@@ -16,16 +16,17 @@ from __future__ import annotations
 
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..beam import simulate_points
-from ..field import AbstractField, GridField, IndexedPoints, PointIndex
+from ..field import AbstractField, GridField, IndexedPoints, PointIndex, SnapshotField, _lerp_in_time
 from ._cells import CellPointSampler
 
-__all__ = ["CellPointField", "cellpoint_field", "simulate_points"]
+__all__ = ["CellPointField", "CellPointSnapshots", "cellpoint_field", "simulate_points"]
 
 
 
@@ -125,14 +126,136 @@ class CellPointField(IndexedPoints, AbstractField):
         """Velocity (m/s, CFD frame) at points relative to `origin` (metres): cellPoint at the
         prepared points (NaN there in no cell), the grid's trilinear value elsewhere."""
         points = jnp.asarray(points).astype(self.dtype)
-        best, hit = self._match(jax.lax.stop_gradient(points))
-        d = points - self.points_local[best] - self.anchor[best]
-        lam = jnp.sum(self.inverse[best] * d[..., None, :], axis=-1)
-        lam = jnp.concatenate([1 - jnp.sum(lam, axis=-1, keepdims=True), lam], axis=-1)
+        best, hit, lam = _barycentric(self, points)
         exact = jnp.sum(lam[..., None] * self.values[best], axis=-2)
         found = self.found[best]
         exact = jnp.where(found[..., None], exact, jnp.nan)  # values are finite: NaN put in last
         return jnp.where(hit[..., None], exact, self.grid.sample_local(points))
+
+
+def _barycentric(field, points):
+    """``(best, hit, lam)``: the prepared point nearest each query (index under
+    `stop_gradient`), whether it is within tolerance, and the query's barycentric coordinates
+    ``(..., 4)`` (cell centre, base, A, B) in that point's tetrahedron: differentiable in the
+    query position."""
+    best, hit = field.index.match(jax.lax.stop_gradient(points))
+    d = points - field.index.points[best] - field.anchor[best]
+    lam = jnp.sum(field.inverse[best] * d[..., None, :], axis=-1)
+    lam = jnp.concatenate([1 - jnp.sum(lam, axis=-1, keepdims=True), lam], axis=-1)
+    return best, hit, lam
+
+
+class CellPointSnapshots(AbstractField):
+    """Snapshots of an unsteady mesh run, exact (the mesh's cellPoint) at prepared points:
+    the time-dependent `CellPointField` (`lidarjax.io.load_field_sequence` with `exact_at`).
+
+    At a query within tolerance of a prepared point, each snapshot's value is the barycentric
+    mix in that point's cellPoint tetrahedron (the same tetrahedra for every snapshot: the
+    geometry is prepared once, only the vertex values change), linear in time between
+    consecutive snapshots, NaN outside their span (as `lidarjax.SnapshotField`), in no cell,
+    or where a snapshot's values there are not finite. Any other query: the graded grid's
+    snapshots (`grid`, a `SnapshotField`; a sequence read with ``grid_fallback=False``
+    holds a NaN grid of two nodes per axis there, so any other query is NaN, flagged, and
+    `resolution` is the graded grid's all the same). Differentiable in the vertex values,
+    the query position (barycentric coordinates) and the time.
+
+    **Arguments:**
+
+    - `grid`: the graded grid's snapshots (`lidarjax.SnapshotField`, times in seconds).
+    - `geometry`: a `CellPointField` of the prepared points (absolute CFD metres): its index,
+      tetrahedra and tolerance are shared by every snapshot (its own values are not used).
+    - `values`: ``(t, n, 4, 3)`` m/s, CFD frame: each snapshot's vertex values (cell
+      centre, base, A, B) of each point's tetrahedron; non-finite rows are NaN queries.
+    - `resolution`: metres, the graded grid's resolution where `grid` is a placeholder
+      (``grid_fallback=False``); default `grid`'s.
+
+    Built on the host, per window of a `lidarjax.FieldSequence`, by
+    `lidarjax.io.load_field_sequence` with `exact_at`.
+    """
+
+    grid: SnapshotField
+    origin: Float[Array, 3]
+    origin_lo: Float[Array, 3]
+    index: PointIndex
+    anchor: Float[Array, "n 3"]
+    inverse: Float[Array, "n 3 3"]
+    values: Float[Array, "t n 4 3"]
+    valid: Bool[Array, "t n"]
+    grid_resolution: float | None = eqx.field(static=True)
+
+    def __init__(self, grid: SnapshotField, geometry: CellPointField, values: Any, *,
+                 resolution: float | None = None):
+        if not isinstance(grid, SnapshotField) or not isinstance(geometry, CellPointField):
+            raise ValueError("CellPointSnapshots: needs a SnapshotField and a CellPointField "
+                             "(the prepared points' geometry)")
+        val = np.asarray(values, np.float64)
+        t, n = grid.n_snapshots, geometry.n_points
+        if val.shape != (t, n, 4, 3):
+            raise ValueError(f"CellPointSnapshots: `values` must have shape ({t}, {n}, 4, 3), "
+                             f"got {val.shape}")
+        valid = np.isfinite(val).all(axis=(2, 3)) & np.asarray(geometry.found)[None]
+        self.grid = grid
+        self.origin, self.origin_lo = grid.origin, grid.origin_lo
+        self.index, self.anchor, self.inverse = geometry.index, geometry.anchor, geometry.inverse
+        self.values = jnp.asarray(np.where(valid[..., None, None], val, 0.0).astype(grid.dtype))
+        self.valid = jnp.asarray(valid)
+        self.grid_resolution = None if resolution is None else float(resolution)
+
+    @property
+    def resolution(self) -> float | None:
+        """The graded grid's resolution (m): probe nodes are chosen for it (`resolution`
+        where the window holds no grid, only the prepared points)."""
+        return self.grid.resolution if self.grid_resolution is None else self.grid_resolution
+
+    @property
+    def time_span(self):
+        return self.grid.time_span
+
+    @property
+    def times(self):
+        """``(t,)`` snapshot times, s."""
+        return self.grid.times
+
+    @property
+    def n_snapshots(self) -> int:
+        return self.grid.n_snapshots
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the grid's snapshots and the prepared values."""
+        return self.grid.nbytes + int(self.values.size * self.values.dtype.itemsize)
+
+    def _exact(self, points, time):
+        """Exact snapshot values at the bracketing snapshots, the time fraction, whether the
+        exact value is defined, and which queries are prepared points."""
+        best, hit, lam = _barycentric(self, points)
+        i, s, inside = self.grid._locate(time)
+        e0 = jnp.sum(lam[..., None] * self.values[i, best], axis=-2)
+        e1 = jnp.sum(lam[..., None] * self.values[i + 1, best], axis=-2)
+        # at a snapshot's own time only its values count (a bad neighbour does not spoil it)
+        ok = inside & self.valid[i, best] & (self.valid[i + 1, best] | (s == 0))
+        return e0, e1, s, ok, hit
+
+    def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+        """The first snapshot's velocity (m/s, CFD frame) at local points (metres)."""
+        return self.sample_local_at(points, self.grid.times[0])
+
+    def sample_local_at(self, points, time):
+        """Velocity (m/s, CFD frame) at local points (metres) and times (s): cellPoint at the
+        prepared points, the grid's snapshots elsewhere; linear in time."""
+        points, time = self.grid._broadcast(points, time)
+        e0, e1, s, ok, hit = self._exact(points, time)
+        exact = _lerp_in_time(e0, e1, s[..., None], ok[..., None])
+        return jnp.where(hit[..., None], exact, self.grid.sample_local_at(points, time))
+
+    def los_local_at(self, points, directions, time):
+        """Velocity along unit `directions` (m/s) at local points and times, as
+        `sample_local_at`."""
+        points, time = self.grid._broadcast(points, time)
+        d = jnp.broadcast_to(jnp.asarray(directions).astype(self.dtype), points.shape)
+        e0, e1, s, ok, hit = self._exact(points, time)
+        exact = _lerp_in_time(jnp.sum(e0 * d, axis=-1), jnp.sum(e1 * d, axis=-1), s, ok)
+        return jnp.where(hit, exact, self.grid.los_local_at(points, d, time))
 
 
 def cellpoint_field(

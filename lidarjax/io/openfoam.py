@@ -668,9 +668,15 @@ def _merge_meshes(p: Path, procs, meshes, addr):
     return mesh, patch_faces
 
 
-def _read_decomposed(p: Path, time: str, field: str):
+def _decomposed_mesh(p: Path):
+    """``(procs, meshes, addr, mesh)``: the processors, their meshes and addressing, and the
+    merged mesh (read once for a sequence of snapshots: `_read_decomposed`'s `merged`)."""
     procs, meshes, addr = _processor_meshes(p)
-    mesh, patch_faces = _merge_meshes(p, procs, meshes, addr)
+    return procs, meshes, addr, _merge_meshes(p, procs, meshes, addr)[0]
+
+
+def _read_decomposed(p: Path, time: str, field: str, merged=None):
+    procs, meshes, addr, mesh = _decomposed_mesh(p) if merged is None else merged
     values = np.full((mesh.n_cells, 3), np.nan)
     bvals: dict[str, Any] = {}
     starts = {name: (start, n) for name, _t, start, n in mesh.patches}

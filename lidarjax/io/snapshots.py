@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import glob
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -29,17 +30,19 @@ from typing import Any
 import numpy as np
 
 from .._util import PathLike, import_optional
-from ..field import FieldSequence, GridField
+from ..field import FieldSequence, GridField, SnapshotField
 from ._cells import build_sampler_and_values
+from ._exact import CellPointField, CellPointSnapshots
 from .fields import FieldArrays, FieldLoadReport, _crop_arrays, _region_box, load_field
 from .openfoam import (
     OpenFOAMField,
     _case_dir,
+    _decomposed_mesh,
     _is_decomposed,
+    _read_decomposed,
     _read_vector_field,
     is_openfoam_case,
     openfoam_times,
-    read_openfoam_field,
     read_openfoam_mesh,
     resample_openfoam,
 )
@@ -74,7 +77,16 @@ def cells_covering(bounds, axes) -> np.ndarray:
     return np.flatnonzero(((chi >= lo - pad) & (clo <= hi + pad)).all(axis=1))
 
 
-def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_snapshots):
+def _mesh_changes(p: Path, name: str, decomposed: bool) -> Path | None:
+    """The `polyMesh` a time directory holds (a mesh that moves or changes there), or None."""
+    for d in ([q for q in sorted(p.glob("processor*")) if q.is_dir()] if decomposed else [p]):
+        if (d / name / "polyMesh").is_dir():
+            return d / name / "polyMesh"
+    return None
+
+
+def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_snapshots,
+                       exact_at=None, grid_fallback=True):
     p = _case_dir(case)
     name = os.fspath(p)
     names = openfoam_times(p, field)
@@ -85,43 +97,123 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
     names = [names[k] for k in keep]
     times = times[keep]
     decomposed = _is_decomposed(p)
-    mesh = None if decomposed else read_openfoam_mesh(p)
-    axes: list[np.ndarray] = []
-    cells: list[np.ndarray] = []
-    bounds: list[Any] = []
-    prepared: list[Any] = []  # (sampler, its PointValues, the grid nodes' tets and weights)
+    # the mesh is read once (a decomposed case: its processors merged once)
+    merged = _decomposed_mesh(p) if decomposed else None
+    mesh = merged[3] if decomposed else read_openfoam_mesh(p)
+    prepared: dict[str, Any] = {}  # the geometry, built once from the first good snapshot
 
-    def load(k: int) -> GridField:
-        if decomposed:
-            of = read_openfoam_field(p, field=field, time=names[k])
-        else:
-            values, boundary = _read_vector_field(p / names[k] / field, mesh)
-            of = OpenFOAMField(case=p, time=names[k], field=field, mesh=mesh,
-                               cell_values=values, boundary=boundary)
-        # the first snapshot fixes the nodes (and the cells around them); every later one is
-        # sampled by cellPoint at the same nodes. The mesh is the same in every snapshot, so
-        # the cells' tetrahedra, the point-value weights and each node's tetrahedron are
-        # found once (at the second snapshot) and every later snapshot only mixes its values
-        if not axes:
-            grid, velocity, _ = resample_openfoam(of, region, spacing, check_points=0)
-            axes.extend(grid)
-            cells.append(cells_covering(of.bounds, grid))
-        elif not prepared:
-            sampler, refill = build_sampler_and_values(of.mesh, of.cell_values, of.boundary, cells[0],
-                                                       bounds[0])
-            prepared.extend((sampler, refill, sampler.grid_locations(axes)))
-            velocity = sampler.values_at(*prepared[2])
-        else:
-            sampler, refill, located = prepared
-            velocity = sampler.with_values(*refill(of.cell_values, of.boundary)).values_at(*located)
-        if not bounds:
-            bounds.append(of.bounds)
-        grid = axes
-        if dtype is not None:
-            velocity = velocity.astype(dtype)
-        return GridField(*grid, velocity)
+    def read(k: int) -> OpenFOAMField:
+        """Snapshot `k`'s velocity, read once; a one-line ValueError naming its time
+        directory for a changed mesh, an unreadable file or non-finite values."""
+        where = p / names[k]
+        moved = _mesh_changes(p, names[k], decomposed)
+        if moved is not None:
+            raise ValueError(f"{os.fspath(moved)}: the mesh changes at time {names[k]}; a "
+                             f"sequence needs one mesh (select the times before it with "
+                             f"`time_range`)")
+        try:
+            if decomposed:
+                _, values, boundary = _read_decomposed(p, names[k], field, merged)
+            else:
+                values, boundary = _read_vector_field(where / field, mesh)
+        except (OSError, ValueError, EOFError) as err:
+            text = str(err).splitlines()[0] if str(err) else type(err).__name__
+            raise ValueError(text if os.fspath(where) in text else f"{os.fspath(where)}: {text}") from None
+        if not np.isfinite(np.add.reduce(values, axis=None)):  # one pass; NaN/inf propagate
+            bad = ~np.isfinite(values).all(axis=1)
+            if bad.any():
+                raise ValueError(f"{os.fspath(where / field)}: {int(bad.sum())} cell values are "
+                                 f"not finite (first: cell {int(np.argmax(bad))})")
+        return OpenFOAMField(case=p, time=names[k], field=field, mesh=mesh, cell_values=values,
+                             boundary=boundary)
 
-    return FieldSequence(times, load, max_snapshots=max_snapshots, name=name)
+    def prepare(of: OpenFOAMField):
+        """The first good snapshot fixes the grid's nodes, the cells around them and (with
+        `exact_at`) the tetrahedra of the prepared points; every snapshot is then the same
+        sparse mix of its own values (`PointValues`, `VertexValues`)."""
+        axes, velocity, _ = resample_openfoam(of, region, spacing, check_points=0)
+        cells = cells_covering(of.bounds, axes) if grid_fallback else np.zeros(0, np.int64)
+        points = None
+        if exact_at is not None:
+            first = GridField(*axes, velocity if dtype is None else velocity.astype(dtype))
+            points = np.asarray(exact_at(first) if callable(exact_at) else exact_at,
+                                np.float64).reshape(-1, 3)
+            if points.shape[0] == 0 or not np.isfinite(points).all():
+                raise ValueError(f"{name}: `exact_at` must give finite (n, 3) CFD metres, n >= 1")
+            lo, hi = points.min(axis=0), points.max(axis=0)
+            pad = 1e-6 * np.maximum(1.0, np.abs(np.concatenate([lo, hi])).max())
+            cells = np.union1d(cells, of.cells_in_box(lo - pad, hi + pad))
+        sampler, refill = build_sampler_and_values(of.mesh, of.cell_values, of.boundary, cells,
+                                                   of.bounds)
+        prepared.update(axes=axes, sampler=sampler, refill=refill)
+        if grid_fallback:
+            prepared["located"] = sampler.grid_locations(axes)
+        else:  # no grid per snapshot: two NaN nodes per axis, the graded grid's resolution
+            prepared.update(axes=[np.array([a[0], a[-1]]) for a in axes],
+                            resolution=GridField(*axes, velocity).resolution)
+        if points is not None:
+            tets, _ = sampler.locate(points)
+            found = tets >= 0
+            vertices = np.full((points.shape[0], 4, 3), np.nan)
+            if found.any():
+                vertices[found] = sampler.tet_vertices(tets[found])[0]
+            mix = refill.vertex_values(sampler, tets)
+            grid = GridField(*axes, velocity if dtype is None else velocity.astype(dtype))
+            prepared.update(mix=mix, geometry=CellPointField(
+                grid, points, vertices, mix(of.cell_values, of.boundary)))
+        return velocity
+
+    def load(k: int):
+        try:
+            of = read(k)
+        except ValueError as err:  # a flagged window, the other snapshots kept
+            warnings.warn(f"{err}; snapshot t = {times[k]:g} s is NaN (its LOS flagged "
+                          f"BEAM_OUTSIDE)", stacklevel=2)
+            of = None
+        if not prepared:
+            if of is None:  # the geometry from the next good snapshot
+                for j in range(len(names)):
+                    try:
+                        prepare(read(j))
+                        break
+                    except ValueError:
+                        continue
+                else:
+                    raise ValueError(f"{name}: no snapshot of `{field}` could be read")
+                velocity = None
+            else:
+                velocity = prepare(of)
+        elif of is not None:
+            velocity = None
+        axes, sampler = prepared["axes"], prepared["sampler"]
+        if not grid_fallback:  # one NaN grid of two nodes per axis, shared by every snapshot
+            if "nan_grid" not in prepared:
+                nan = np.full((2, 2, 2, 3), np.nan, dtype or np.float64)
+                prepared["nan_grid"] = GridField(*axes, nan)
+            grid = prepared["nan_grid"]
+        else:
+            if of is None:
+                velocity = np.full(tuple(a.size for a in axes) + (3,), np.nan)
+            elif velocity is None:
+                velocity = sampler.with_values(*prepared["refill"](of.cell_values, of.boundary)
+                                               ).values_at(*prepared["located"])
+            if dtype is not None:
+                velocity = velocity.astype(dtype)
+            grid = GridField(*axes, velocity)
+        if "mix" not in prepared:
+            return grid
+        n = prepared["geometry"].n_points
+        exact = (np.full((n, 4, 3), np.nan) if of is None
+                 else prepared["mix"](of.cell_values, of.boundary))
+        return grid, exact
+
+    def assemble(window_times, snaps):
+        grid = SnapshotField(window_times, [g for g, _ in snaps])
+        return CellPointSnapshots(grid, prepared["geometry"], np.stack([e for _, e in snaps]),
+                                  resolution=prepared.get("resolution"))
+
+    return FieldSequence(times, load, max_snapshots=max_snapshots, name=name,
+                         assemble=assemble if exact_at is not None else None)
 
 
 def _netcdf_sequence(path: Path, *, region, time_range, dtype, max_snapshots):
@@ -196,6 +288,8 @@ def load_field_sequence(
     field: str = "U",
     dtype: Any = None,
     max_snapshots: int = 8,
+    exact_at: Any = None,
+    grid_fallback: bool = True,
 ) -> FieldSequence:
     """The snapshots of an unsteady CFD run as one time-dependent field (`FieldSequence`).
 
@@ -212,6 +306,26 @@ def load_field_sequence(
     - `field`: OpenFOAM's vector field name (default ``U``).
     - `dtype`: the working float dtype of every snapshot (default JAX's default float).
     - `max_snapshots`: the most snapshots held at once (a window; at least 2).
+    - `exact_at`: OpenFOAM only: the points the run will sample, ``(n, 3)`` absolute CFD
+      metres, or a function of the first snapshot's `GridField` returning them (the probe's
+      nodes depend on its resolution: ``lambda g: lidarjax.io.simulate_points(scan, mount,
+      heights, lidarjax.probe_for_field(g, scan, heights, probe))`` for a fixed profiler).
+      Each window is then a `lidarjax.io.CellPointSnapshots`: at those points every
+      snapshot is the mesh's own cellPoint (what OpenFOAM's `probes` report), linear in time
+      between snapshots; the graded grid answers any other point (a moving lidar's). The
+      tetrahedra of the points, the cells around the grid's nodes and the point-value
+      weights are found once (the mesh is the same in every snapshot); each snapshot is then
+      its velocity file read once and a sparse matrix product.
+    - `grid_fallback`: with `exact_at`: False skips the graded grid of every snapshot (its
+      resampling costs several times the read of a binary velocity file): a query at a point
+      not prepared is then NaN (a LOS flagged ``BEAM_OUTSIDE``). For a run that samples only
+      its prepared points (a fixed lidar); the probe's nodes are still chosen for the graded
+      grid's resolution.
+
+    A snapshot whose time directory holds a changed mesh (`polyMesh`), whose velocity cannot
+    be read (missing on a processor, truncated, corrupt) or has non-finite values is NaN,
+    with a one-line warning naming the time directory: the LOS whose times fall next to it
+    are NaN (flagged ``BEAM_OUTSIDE``), every other snapshot is kept.
 
     **Returns:** a `lidarjax.FieldSequence` (pass it to `lidarjax.simulate_series` as the
     field). Raises `ValueError` naming the file for fewer than two snapshots, times that do
@@ -219,6 +333,13 @@ def load_field_sequence(
     """
     if region is not None:
         _region_box(region)  # validates
+    if exact_at is not None and (isinstance(source, (list, tuple)) or not is_openfoam_case(
+            Path(os.fspath(source)))):
+        raise ValueError(f"{source!r}: `exact_at` applies to an OpenFOAM case (a mesh); "
+                         "gridded snapshots are their own data.")
+    if not grid_fallback and exact_at is None:
+        raise ValueError("load_field_sequence: grid_fallback=False needs `exact_at` (the points "
+                         "the run samples); without them every query needs the grid.")
     if isinstance(source, (list, tuple)):
         paths = [Path(p) for p in source]
         return _files_sequence(paths, times, region=region, dtype=dtype,
@@ -239,7 +360,8 @@ def load_field_sequence(
                              f"use `time_range` to select them.")
         return _openfoam_sequence(p, field=field, region=region, spacing=spacing,
                                   time_range=time_range, dtype=dtype,
-                                  max_snapshots=max_snapshots)
+                                  max_snapshots=max_snapshots, exact_at=exact_at,
+                                  grid_fallback=grid_fallback)
     if p.suffix.lower() in (".nc", ".nc4", ".netcdf", ".cdf", ".h5", ".hdf5"):
         if spacing is not None or times is not None:
             raise ValueError(f"{text}: a NetCDF sequence takes its grid and times from the file;"

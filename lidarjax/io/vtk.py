@@ -22,7 +22,9 @@ points in no cell are NaN.
 `.vtu` files are read by a small reader of VTK's XML format here (inline ascii or base64
 binary, optionally zlib-compressed, and appended raw or base64 data; polyhedra included,
 which meshio cannot mix with other cells); legacy `.vtk` files with meshio (`pip install
-lidarjax[meshio]`). Only the velocity arrays are decoded, and the faces are matched and
+lidarjax[meshio]`; its parser walks polyhedra cell by cell, the faces are then matched here
+at once as for `.vtu`: for a large polyhedral mesh write `.vtu` instead, `foamToVTK -legacy
+off`). Only the velocity arrays are decoded, and the faces are matched and
 oriented for all cells at once (no loop per cell or face): the 185,237-cell `foamToVTK`
 export of the v1912 `windAroundBuildings` tutorial reads in 0.8-1.7 s of CPU time
 (`benchmarks/results/cfd_ingest_vtk.md`). `.vtm` multiblock files are read directly (XML) and every volume block
@@ -145,11 +147,20 @@ def _cell_faces(mesh, path: Path):
             kept_blocks.append(b)
             n_cells += conn.shape[0]
         elif ctype.startswith("polyhedron"):
-            for c, faces in enumerate(block.data):
-                for face in faces:
-                    cells_faces.append(np.asarray(face, np.int64)[None, :])
-                    cell_ids.append(np.array([n_cells + c]))
-                    sizes.append(np.array([len(face)]))
+            # every face of every cell at once, padded as the .vtu reader pads its faces
+            per_cell = np.fromiter((len(faces) for faces in block.data), np.int64,
+                                   count=len(block.data))
+            flat = [face for faces in block.data for face in faces]
+            size = np.fromiter((len(face) for face in flat), np.int64, count=len(flat))
+            if size.size:
+                stream = np.concatenate([np.asarray(face, np.int64).reshape(-1) for face in flat])
+                col = np.arange(int(size.max()))
+                inside = col[None, :] < size[:, None]
+                start = np.concatenate([[0], np.cumsum(size)[:-1]])
+                cells_faces.append(np.where(inside, stream[np.where(inside, start[:, None] + col, 0)],
+                                            -1))
+                cell_ids.append(n_cells + np.repeat(np.arange(per_cell.size), per_cell))
+                sizes.append(size)
             kept_blocks.append(b)
             n_cells += len(block.data)
         # vertices, lines, surface cells: not part of the volume mesh
@@ -602,7 +613,8 @@ def _read_legacy(path: Path):
     try:
         m = meshio.read(path, file_format="vtk")
     except Exception as err:  # meshio raises many types for unreadable files
-        raise ValueError(f"{os.fspath(path)}: not a readable legacy VTK file ({err})") from None
+        raise ValueError(f"{os.fspath(path)}: not a readable legacy VTK file ({err}); write "
+                         f".vtu instead (foamToVTK -legacy off)") from None
     pad, cell_of, sizes, nc, kept = _cell_faces(m, path)
     cdata = {}
     for key, blocks in m.cell_data.items():

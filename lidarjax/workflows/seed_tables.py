@@ -8,6 +8,7 @@ when the CFD runs share a grid (one trace, ``jax.vmap`` over the runs and one ba
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Callable, Sequence
 
@@ -19,16 +20,17 @@ from .._backend import default_batch, positive_size
 from .._util import import_optional
 from ..angles import horizontal_speed, seed_azimuth
 from ..batch import simulate_rotations, stack_fields
-from ..field import GridField
+from ..field import GridField, IndexedPoints
 from ..footprint import scan_bounds
-from ..forward import Simulation, beam_gradient, simulate
+from ..forward import Simulation, beam_gradient, probe_for_field, simulate
+from ..io import simulate_points
 from ..io.settings import Settings
 from ..mount import Mount
 from ..progress import AbstractProgress, LineProgress, progress_meter
 from ..response import ProfileTable, ResponseTable
 
 __all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "settings_mount",
-           "settings_mounts", "SEED_U_REF"]
+           "settings_mounts", "SEED_U_REF", "ExactPoints", "load_exact"]
 
 #: The free stream hard-coded in the seed UDF (its CFD inlet), CFD frame, m/s.
 SEED_U_REF = (-15.0, 0.0, 0.0)
@@ -82,6 +84,48 @@ def settings_mounts(settings: Settings, betas: Sequence[float], *, pitch: float 
                   epsilon=settings.epsilon, pitch=pitch, roll=roll) for b in betas]
 
 
+class ExactPoints:
+    """``grid -> points``: every point `simulate` samples for one mount (`simulate_points`),
+    the probe's nodes chosen for the grid's resolution (`probe_for_field`), as
+    `lidarjax.io.load_field`'s `exact_at` takes it; a mesh loaded with it is exact (the mesh's
+    own cellPoint) at those points. The probe chosen is kept as `probe` (None until called),
+    so that `simulate` is given the same nodes without choosing them again.
+
+    The one place the profiler paths (`simulate --field`, `build_table`, `simulate_settings`,
+    `sensitivity_report`) prepare their points. A plain class, so Dask can ship it.
+
+    **Arguments:** `scan`, `mount` (one, not a batch), `heights` (m above the lidar) and
+    `probe` (None: the point probe) as given to `simulate`.
+    """
+
+    def __init__(self, scan, mount: Mount, heights, probe=None):
+        self.scan, self.mount, self.probe_given = scan, mount, probe
+        self.heights = np.asarray(heights, np.float64)
+        self.probe = None
+
+    def __call__(self, grid) -> np.ndarray:
+        used = self.probe_given
+        if used is not None:
+            used = probe_for_field(grid, self.scan, jnp.asarray(self.heights), used,
+                                   mount=self.mount, caller="exact points")
+        self.probe = used
+        return simulate_points(self.scan, self.mount, self.heights, used)
+
+
+def _takes_exact_at(load) -> bool:
+    try:
+        return "exact_at" in inspect.signature(load).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def load_exact(load, key, points: ExactPoints):
+    """``load(key)``, made exact at `points` where the loader takes an ``exact_at`` keyword (a
+    mesh read by `lidarjax.io.load_field` then comes back as a `lidarjax.io.CellPointField`);
+    any other loader (a grid, an analytic scene) is called as it is."""
+    return load(key, exact_at=points) if _takes_exact_at(load) else load(key)
+
+
 def simulate_settings(
     settings: Settings,
     betas: Sequence[float],
@@ -101,7 +145,9 @@ def simulate_settings(
     - `settings`: a `lidarjax.io.Settings` (heights ``j * height / nh``, gamma, psi,
       epsilon and one location per beta).
     - `betas`: platform rotations (degrees) to run; each needs a location row.
-    - `field_for_beta`: loads the CFD run of one beta (e.g. ``lidarjax.io.load_field``).
+    - `field_for_beta`: loads the CFD run of one beta (e.g. ``lidarjax.io.load_field``). If
+      it takes an ``exact_at`` keyword it is given that rotation's `ExactPoints` (a mesh is
+      then exact, its own cellPoint, at every point the rotation samples; `load_exact`).
     - `scan`: the `lidarjax.Scan`.
     - `u_ref`: free-stream vector in the CFD frame (m/s); default the seed UDF's.
     - `probe`: probe volume (default point).
@@ -121,7 +167,9 @@ def simulate_settings(
         batch_size = positive_size(batch_size, "simulate_settings", "batch_size")
     mount = settings_mount(settings, betas, pitch=pitch, roll=roll)
     heights = jnp.asarray(settings.heights())
-    fields = [field_for_beta(b) for b in betas]
+    # a mesh read by a loader that takes `exact_at` is exact at each rotation's own points
+    fields = [load_exact(field_for_beta, b, ExactPoints(scan, mount[k], heights, probe))
+              for k, b in enumerate(betas)]
     n = len(betas)
     if batch_size is None:  # the stacked copy and the vmapped temporaries of one run
         per_run = 2 * getattr(fields[0], "nbytes", 0) + 1
@@ -131,7 +179,11 @@ def simulate_settings(
     for i in range(0, n, size):  # the last batch padded with its last run: one compilation
         idx = np.minimum(np.arange(i, i + size), n - 1)
         try:
-            stacked = stack_fields([fields[k] for k in idx]) if size > 1 else None
+            # a mesh made exact at each rotation's own points is simulated per rotation: a
+            # batch chooses one node count per height for all its mounts, which need not be
+            # each rotation's own (the points prepared)
+            exact = any(isinstance(fields[k], IndexedPoints) for k in idx)
+            stacked = stack_fields([fields[k] for k in idx]) if size > 1 and not exact else None
         except ValueError:  # runs on different grids: one call (and compilation) per grid
             stacked = None
         if stacked is None:
@@ -173,7 +225,11 @@ def build_table(
     simulated, and dropped, so the peak memory is about one run whatever their number.
     `field_for_beta` may load only that region itself (``lidarjax.io.load_field(path,
     region=...)``, with `table_region` giving it); any other `AbstractField` (an analytic
-    scene) is used as it is.
+    scene) is used as it is. A loader that takes an ``exact_at`` keyword (as
+    `lidarjax.io.load_field` does) is given the points of that run's mount (`ExactPoints`): a
+    mesh (OpenFOAM case, VTK file) then answers every point the run samples with its own
+    cellPoint interpolation, what OpenFOAM's `probes` report, and the graded grid serves no
+    point of the table.
 
     **Arguments** (besides those of `simulate_settings`):
 
@@ -264,7 +320,9 @@ class _AtValue:
     def __init__(self, field_for_run, value):
         self.field_for_run, self.value = field_for_run, value
 
-    def __call__(self, beta):
+    def __call__(self, beta, exact_at=None):
+        if exact_at is not None and _takes_exact_at(self.field_for_run):
+            return self.field_for_run(beta, self.value, exact_at=exact_at)
         return self.field_for_run(beta, self.value)
 
 
@@ -280,11 +338,14 @@ class _TableRun:
     def __call__(self, task):
         beta, mount = task
         t0 = time.perf_counter()
-        field = self.field_for_beta(beta)
-        shape = getattr(field, "shape", None)
+        # a mesh (OpenFOAM, VTK) read by a loader that takes `exact_at` is made exact at the
+        # points this mount samples: its own cellPoint there, as `lidarjax simulate --field`
+        field = load_exact(self.field_for_beta, beta,
+                           ExactPoints(self.scan, mount, self.heights, self.probe))
+        shape = getattr(getattr(field, "grid", field), "shape", None)  # an exact mesh: its grid
         if isinstance(field, GridField):
             field = field.crop(self.lo, self.hi)
-        crop = getattr(field, "shape", None)
+        crop = getattr(getattr(field, "grid", field), "shape", None)
         sim = simulate(field, self.scan, mount, jnp.asarray(self.heights), u_ref=self.u_ref,
                        probe=self.probe)
         # the velocity gradient along the beams, while the run is loaded (lidarjax.calibrate)

@@ -44,7 +44,7 @@ from ..plots import plot_budget, plot_sensitivity_profiles
 from ..probe import AbstractProbe
 from ..scan import Scan
 from ..sensitivity import OUTPUTS, Budget, budget_columns, uncertainty
-from .seed_tables import SEED_U_REF, settings_mount
+from .seed_tables import SEED_U_REF, ExactPoints, settings_mount
 
 __all__ = ["SensitivityReport", "sensitivity_report", "write_sensitivity_report",
            "REPORT_OUTPUTS", "REPORT_SCANS"]
@@ -105,9 +105,12 @@ class SensitivityReport:
                 "method": _METHOD}
 
 
-def _fields(fields, betas: list[float]) -> list[AbstractField]:
-    def load(f):
-        return load_field(f) if isinstance(f, str | Path) else f
+def _fields(fields, betas: list[float], points: list[ExactPoints]) -> list[AbstractField]:
+    def load(f, k):
+        # a mesh (OpenFOAM case, VTK file) exact, its own cellPoint, at every point the
+        # rotation samples (`ExactPoints`); the graded grid serves only the Monte Carlo's
+        # perturbed points
+        return load_field(f, exact_at=points[k]) if isinstance(f, str | Path) else f
 
     if isinstance(fields, AbstractField):
         return [fields] * len(betas)
@@ -115,13 +118,13 @@ def _fields(fields, betas: list[float]) -> list[AbstractField]:
         missing = [b for b in betas if b not in fields]
         if missing:
             raise ValueError(f"sensitivity_report: no field for beta {missing[0]:g}")
-        return [load(fields[b]) for b in betas]
+        return [load(fields[b], k) for k, b in enumerate(betas)]
     if callable(fields):
-        return [load(fields(b)) for b in betas]
+        return [load(fields(b), k) for k, b in enumerate(betas)]
     fields = list(fields)
     if len(fields) != len(betas):
         raise ValueError(f"sensitivity_report: {len(fields)} fields for {len(betas)} betas")
-    return [load(f) for f in fields]
+    return [load(f, k) for k, f in enumerate(fields)]
 
 
 def sensitivity_report(
@@ -149,7 +152,9 @@ def sensitivity_report(
     - `settings`: a `lidarjax.io.Settings` or the path of a settings.dat.
     - `fields`: the CFD run of each rotation: a sequence in the order of `betas`, a mapping
       ``{beta: field}``, a function of beta, or one field for all; paths are read with
-      `lidarjax.io.load_field`.
+      `lidarjax.io.load_field`, a mesh (OpenFOAM case, VTK file) exact at every point its
+      rotation samples (`lidarjax.workflows.seed_tables.ExactPoints`: the mesh's own
+      cellPoint there; the graded grid answers only the Monte Carlo's perturbed points).
     - `std`: ``{input: standard uncertainty}`` in the input's unit (`lidarjax.uncertainty`),
       e.g. ``{"epsilon": 0.5, "pitch": 0.2, "location": (0.05, 0.05, 0.1)}``.
     - `betas`: the rotations (degrees; default every row of the settings).
@@ -196,7 +201,8 @@ def sensitivity_report(
         scan = make(**kw) if cone_angle is None else make(cone_angle, **kw)
     mounts = settings_mount(settings, betas, pitch=pitch, roll=roll)
     heights = jnp.asarray(settings.heights())
-    runs = _fields(fields, betas)
+    runs = _fields(fields, betas, [ExactPoints(scan, mounts[k], heights, probe)
+                                   for k in range(len(betas))])
     budget = uncertainty(runs, scan, mounts, heights, std=std, u_ref=u_ref, probe=probe,
                          outputs=outputs, n_monte_carlo=n_monte_carlo)
     budget = jax.tree_util.tree_map(np.asarray, budget)

@@ -3,6 +3,9 @@ the PPI/RHI plot, one-line refusals."""
 
 from __future__ import annotations
 
+import contextlib
+import io
+
 import numpy as np
 import pytest
 
@@ -49,6 +52,32 @@ def test_bad_arguments_one_line(tmp_path, capsys, argv, text):
     rc = main(argv + ["--out", str(tmp_path / "x.nc")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and text in err and "\n" not in err
+
+
+def test_scan_on_a_mesh_is_exact_at_its_nodes(tmp_path):
+    """`lidarjax scan --field CASE` on an OpenFOAM case: read over the scan's region and exact
+    (the mesh's cellPoint) at every node it samples: the same LOS as `simulate_scan` on the
+    field prepared at `scan_points` (the API route of docs/scanning.md)."""
+    from lidarjax.cli import build_parser
+    from lidarjax.cli._scanning import read_scan_source, scan_region
+    from lidarjax.scanning import instrument_probe, simulate_scan
+
+    case = DATA / "openfoam" / "windAroundBuildings_cut"
+    argv = ["scan", "ppi", "--elevation", "40", "--n-rays", "4", "--gates", "3",
+            "--gate-length", "6", "--field", str(case), "--location", "96,126,39",
+            "--out", str(tmp_path / "s.nc")]
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(argv) == 0
+    got = read_scan_netcdf(tmp_path / "s.nc")["radial_velocity"]
+    pattern, gate = read_scan_source(build_parser().parse_args(argv))
+    mount = lj.Mount([96.0, 126.0, 39.0])
+    probe = instrument_probe("halo_streamline", gate_length=gate)
+    region = scan_region(pattern, mount, probe)
+    field = lj.io.load_field(case, region=region,
+                             exact_at=lambda g: lj.scan_points(g, pattern, mount, probe))
+    ref = np.asarray(simulate_scan(field, pattern, mount, probe=probe).los)
+    assert np.isfinite(ref).sum() >= 6
+    np.testing.assert_allclose(got.reshape(ref.shape), ref, rtol=0, atol=1e-9)
 
 
 def test_polar_cells_are_the_gates_between_ray_edges_and_gate_ends():

@@ -160,3 +160,53 @@ def test_scanning_lidar_exact_at_its_nodes(small):
     np.testing.assert_allclose(got, expect, rtol=0, atol=1e-10)
     graded = np.asarray(lj.simulate_scan(grid, pattern, mount, probe=probe).los)
     assert np.nanmax(np.abs(graded - expect)) > 1e-3
+
+
+def test_sensitivity_on_a_mesh_matches_finite_differences_of_the_exact_path(small):
+    """The Jacobian of the lidar speed w.r.t. the mount location (`lidarjax.sensitivity` on
+    a `CellPointField`) against central differences of the exact path itself: the field
+    prepared again, by the mesh's cellPoint, at the moved mount's own nodes; and w.r.t. the
+    vertex values (linear: against a central difference of one value). A generic mount (off
+    the mesh's planes, beams off the axes) keeps every node inside its tetrahedron."""
+    of, _, _, scan, probe, _, h = small
+    mount = lj.Mount([96.31, 125.73, 39.17], beta=7.0)
+    region = lj.scan_bounds(scan, mount, h, probe=probe)
+    lo, hi = region
+    axes, vel, _ = resample_openfoam(of, (np.asarray(lo) - 1.0, np.asarray(hi) + 1.0),
+                                     check_points=0)
+    grid = lj.GridField(*axes, vel)
+    sampler = of.sampler(of.cells_in_box(np.asarray(lo) - 2.0, np.asarray(hi) + 2.0))
+
+    def exact(m):
+        return cellpoint_field(sampler, grid, simulate_points(scan, m, h, probe))
+
+    f = exact(mount)
+    u_ref = jnp.array([10.0, 0.0, 0.0])
+    sens = lj.sensitivity(f, scan, mount, h, u_ref=u_ref, probe=probe, wrt=("location",),
+                          outputs=("lidar_speed",))
+    jac = np.asarray(sens.jacobian["lidar_speed"])  # (h, 3)
+    assert np.isfinite(jac).all()
+    eps = 1e-4
+    fd = np.zeros_like(jac)
+    for a in range(3):
+        speeds = []
+        for sgn in (1.0, -1.0):
+            loc = np.asarray(mount.location, np.float64).copy()
+            loc[a] += sgn * eps
+            m = lj.Mount(loc, beta=7.0)
+            speeds.append(np.asarray(lj.simulate(exact(m), scan, m, h, u_ref=u_ref,
+                                                 probe=probe).lidar_speed))
+        fd[:, a] = (speeds[0] - speeds[1]) / (2 * eps)
+    np.testing.assert_allclose(jac, fd, rtol=1e-5, atol=1e-7)
+    assert np.abs(jac).max() > 1e-3  # the roof's shear: the location matters
+
+    def speed(values):
+        g = eqx.tree_at(lambda x: x.values, f, values)
+        return lj.simulate(g, scan, mount, h, u_ref=u_ref, probe=probe).lidar_speed[0]
+
+    grad = np.asarray(jax.grad(speed)(f.values))
+    k = np.unravel_index(np.argmax(np.abs(grad)), grad.shape)
+    bump = np.zeros(grad.shape)
+    bump[k] = 1e-3
+    fd_v = (float(speed(f.values + bump)) - float(speed(f.values - bump))) / 2e-3
+    assert np.isclose(grad[k], fd_v, rtol=1e-6), (grad[k], fd_v)

@@ -137,3 +137,38 @@ def test_native_path_equals_openfoam_sampling_on_the_hill(dtype, tmp_path):
     a, b = np.asarray(sim.lidar_speed), np.asarray(foam.lidar_speed)
     assert np.isfinite(a).all() and np.isfinite(b).all()
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-8 if dtype == np.float64 else 2e-4)
+
+
+def test_monitor_points_given_the_field_write_the_nodes_simulate_uses(roof, tmp_path):
+    """`lidarjax monitor-points --field CASE` chooses the nodes as `lidarjax simulate --field
+    CASE` does (per height from the spacing along the beams: both print the same counts, and
+    the points written are simulate's prepared points, named), nothing copied by hand; and
+    `--sampled` without the field refuses the 77-node samples in one line naming the count."""
+    settings, case, _, _ = roof
+    common = ["--scan", "windcube_v2", "--probe", "pulsed"]
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        assert main(["monitor-points", str(settings), *common, "--field", str(case),
+                     "--out", str(tmp_path / "w")]) == 0
+        assert main(["simulate", str(settings), "--field", str(case), *common,
+                     "--out", str(tmp_path / "sim")]) == 0
+    wrote = next(line for line in err.getvalue().splitlines() if "probe nodes per beam" in line)
+    said = next(line for line in out.getvalue().splitlines() if "probe nodes per beam" in line)
+    counts = wrote.split(":")[1].split("(")[0].split()
+    assert set(counts) == set(said.split(":")[1].split("(")[0].split()), (wrote, said)
+    s = read_settings(settings)
+    scan, mount, h = lj.windcube_v2(), lj.Mount(s.location(0.0)), np.asarray(s.heights())
+    grid = lj.io.load_field(case, region=lj.scan_bounds(scan, mount, h, probe=lj.PulsedProbe()))
+    used = lj.probe_for_field(grid, scan, h, lj.PulsedProbe(), mount=mount)
+    expected = lj.monitor_points(scan, mount, h, used).points
+    rows = [r.split(",") for r in (tmp_path / "w" / "lidarProbes.csv").read_text().splitlines()
+            if r and not r.startswith("#") and not r.startswith("name")]
+    got = np.array([[float(v) for v in r[2:5]] for r in rows])
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
+    sampled = _unzipped(tmp_path, case, "400", "pulsed_roof")
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert main(["monitor-points", str(settings), *common, "--sampled", str(sampled),
+                     "--out", str(tmp_path / "x")]) == 2
+    line = err.getvalue().strip()
+    assert "\n" not in line.split("error:")[-1] and "--probe-nodes 77" in line, line

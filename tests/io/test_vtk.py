@@ -2,6 +2,7 @@
 their own cells with OpenFOAM's cellPoint ingredients."""
 
 import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -76,3 +77,27 @@ def test_missing_velocity_lists_arrays(tmp_path):
     (tmp_path / "x.vtu").write_text(text.replace("Name='U'", "Name='p'"))
     with pytest.raises(ValueError, match="no velocity array.*found p"):
         read_vtk_field(tmp_path / "x.vtu")
+
+
+def test_legacy_polyhedra_walked_at_once_as_the_hexahedra():
+    """A legacy file's polyhedra (meshio's ``polyhedronN`` blocks: a list of faces per cell)
+    give the same faces, cells and sizes as the same cells given as hexahedra, in one pass
+    over all faces (no numpy call per cell or face)."""
+    meshio = pytest.importorskip("meshio")
+    from lidarjax.io.vtk import _FACES, _cell_faces
+
+    ax = np.linspace(0.0, 3.0, 4)
+    pts = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), axis=-1).reshape(-1, 3)
+    idx = np.arange(pts.shape[0]).reshape(4, 4, 4)
+    hexes = np.array([[idx[i, j, k], idx[i + 1, j, k], idx[i + 1, j + 1, k], idx[i, j + 1, k],
+                       idx[i, j, k + 1], idx[i + 1, j, k + 1], idx[i + 1, j + 1, k + 1],
+                       idx[i, j + 1, k + 1]] for i in range(3) for j in range(3) for k in range(3)])
+    poly = [[h[list(f)] for f in _FACES["hexahedron"]] for h in hexes]
+    a = _cell_faces(meshio.Mesh(pts, [("polyhedron8", poly)]), Path("poly.vtk"))
+    b = _cell_faces(meshio.Mesh(pts, [("hexahedron", hexes)]), Path("hex.vtk"))
+    order_a = np.lexsort((np.arange(a[1].size), a[1]))  # faces cell by cell in both
+    order_b = np.lexsort((np.arange(b[1].size), b[1]))
+    np.testing.assert_array_equal(a[0][:, order_a], b[0][:, order_b])
+    np.testing.assert_array_equal(a[1][order_a], b[1][order_b])
+    np.testing.assert_array_equal(a[2][order_a], b[2][order_b])
+    assert a[3] == b[3] == 27
