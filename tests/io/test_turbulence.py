@@ -10,7 +10,7 @@ import pytest
 from lidarjax import scenes
 from lidarjax.io import read_hawc2_box, read_turbsim, write_hawc2_box, write_turbsim
 from lidarjax.scenes import FrozenTurbulence
-from lidarjax.turbulence import TurbulenceBox
+from lidarjax.turbulence import TurbulenceBox, mann_box
 
 from ..data import make_turbsim_fixture as fx
 from ..helpers import DATA
@@ -96,10 +96,10 @@ def test_hawc2_box_from_hipersim(tmp_path):
     want = np.moveaxis(np.asarray(mtf.uvw), 0, -1)
     np.testing.assert_allclose(np.asarray(box.velocity), want.astype(np.float32), rtol=0, atol=0)
     # lidarjax's generator wrapper gives the same box
-    gen = scenes.mann_box(0.1, 30.0, 3.2, shape, spacing, seed=4, periodic=True)
+    gen = mann_box(0.1, 30.0, 3.2, shape, spacing, seed=4, periodic=True)
     np.testing.assert_allclose(np.asarray(gen.velocity), want, rtol=1e-12, atol=1e-12)
     assert gen.periodic == (True, True)
-    doubled = scenes.mann_box(0.1, 30.0, 3.2, shape, spacing, seed=4)  # hipersim's y/z doubling
+    doubled = mann_box(0.1, 30.0, 3.2, shape, spacing, seed=4)  # hipersim's y/z doubling
     assert doubled.periodic == (False, False) and doubled.shape == shape
     # write back, hipersim reads it
     out = write_hawc2_box(box, *(tmp_path / f"back_{c}.bin" for c in "uvw"))
