@@ -785,7 +785,7 @@ def calibrate(
     *,
     weights: Float[ArrayLike, "r h b"] | None = None,
     min_beams: int = 3,
-    iterations: int = 12,
+    iterations: int = 20,
     covariance: str = "robust",
     north_offset: str = "instrument",
     runs: TableRuns | None = None,
@@ -814,7 +814,7 @@ def calibrate(
       reference whose speed calibration differs from the lidar's cannot bias the angles.
     - `weights`: optional ``(r, h, b)`` relative inverse variances of the beams.
     - `min_beams`: fewest usable beams for a record-height to count (default 3).
-    - `iterations`: most Gauss--Newton passes over the records (default 12; each pass
+    - `iterations`: most Gauss--Newton passes over the records (default 20; each pass
       updates the offsets, by at most 5 degrees of epsilon and 1 degree of tilt, and every
       record-height's free stream; a step that raises the objective is halved back; it
       stops once no reported offset moves by more than `STEP_SHARE` (1 %) of its standard
