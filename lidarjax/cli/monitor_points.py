@@ -33,7 +33,7 @@ from ..io.monitor_points import (
 )
 from ..workflows.monitor_points import monitor_points, simulate_from_monitor_points
 from ..workflows.seed_results import write_seed_results
-from ..workflows.seed_tables import settings_mount, table_region
+from ..workflows.seed_tables import settings_mount, settings_probes, table_region
 from ._common import (
     add_probe_arguments,
     field_paths,
@@ -69,13 +69,17 @@ def register(sub) -> None:
                     "point-reference column of every selected mount of a seed settings.dat as "
                     "an OpenFOAM probes function object (<out>/<name>), a zCFD probe file "
                     "(<out>/<name>_zcfd.py, turb_probe layout) and CSV (<out>/<name>.csv). "
-                    "Each probe is named <mount>_h<height>_beam<b>_q<node>. With --sampled, "
-                    "read the values the CFD code sampled there instead and write the seed "
+                    "Each probe is named <mount>_h<height>_beam<b>_q<node>. With --field CFD "
+                    "the nodes are those 'lidarjax simulate --field CFD' samples, every beta "
+                    "its own (one points list: each mount's points in turn). With --sampled, "
+                    "read the values the CFD code sampled there instead (checked rotation "
+                    "by rotation against the points these options give) and write the seed "
                     "output files, as 'lidarjax simulate' does.",
         epilog="example: lidarjax monitor-points settings.dat --all --scan windcube_v2 --probe pulsed "
-               "--out probes/ ; cp probes/lidarProbes case/system/ ; (cd case && postProcess "
-               "-func lidarProbes -latestTime) ; lidarjax monitor-points settings.dat --all --scan "
-               "windcube_v2 --probe pulsed --sampled case/postProcessing/lidarProbes --out results/",
+               "--field 'runs/b{beta}' --out probes/ ; cp probes/lidarProbes case/system/ ; "
+               "(cd case && postProcess -func lidarProbes -latestTime) ; lidarjax monitor-points "
+               "settings.dat --all --scan windcube_v2 --probe pulsed --field 'runs/b{beta}' "
+               "--sampled case/postProcessing/lidarProbes --out results/",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     pr.add_argument("settings", help="the seed's settings.dat")
     which = pr.add_mutually_exclusive_group()
@@ -94,7 +98,10 @@ def register(sub) -> None:
                        help="the CFD run(s) `lidarjax simulate --field` would read ('{beta}' "
                             "for several betas): the probe's nodes are chosen for its "
                             "resolution as simulate chooses them, so both routes sample the "
-                            "same nodes")
+                            "same nodes; each beta gets its own node counts per height (a "
+                            "mesh's rotations whose beams see other cells get other counts). "
+                            "Give it again with --sampled: the file must hold every beta's "
+                            "nodes")
     nodes.add_argument("--resolution", type=positive_float, default=None, metavar="M",
                        help="the CFD grid's resolution in metres (what simulate reports as the "
                             "field's spacing): the nodes simulate would choose for it")
@@ -120,52 +127,60 @@ def _configuration(args):
         settings.location(b)  # a ValueError naming the missing row
     heights = np.asarray(args.heights if args.heights is not None else settings.heights())
     scan = make_scan(args.scan, args.cone_angle)
-    probe = _simulate_nodes(args, settings, betas, heights, scan, make_probe(args))
+    probes = _simulate_nodes(args, settings, betas, heights, scan, make_probe(args))
     mounts = settings_mount(settings, betas)
-    locs = monitor_points(scan, mounts, heights, probe)
-    return settings, betas, heights, scan, probe, mounts, locs
+    locs = monitor_points(scan, mounts, heights, probes)
+    return settings, betas, heights, scan, probes, mounts, locs
 
 
-def _simulate_nodes(args, settings, betas, heights, scan, probe):
-    """The probe with the nodes `lidarjax simulate` uses: chosen for --field's (or
-    --resolution's) grid as simulate chooses them (`probe_for_field`, each beta's run read
-    over the region simulate reads), or the probe as given (a note on stderr where simulate
-    would choose others)."""
+def _counts(probe) -> str:
+    """A probe's node counts per height, 'n1/n2/...' (one number where all heights share it)."""
+    if probe is None:
+        return "1"
+    counts = getattr(probe, "node_counts", (probe.n_nodes,))
+    return "/".join(map(str, counts)) if len(set(counts)) > 1 else str(counts[0])
+
+
+def _simulate_nodes(args, settings, betas, heights, scan, probe) -> list:
+    """The probe of every beta (in order) with the nodes `lidarjax simulate` uses: chosen for
+    --field's (or --resolution's) grid as simulate chooses them (`settings_probes`: each
+    beta's run read over the region simulate reads, batched as simulate batches it; a mesh's
+    rotations get each their own node counts per height), or the probe as given (a note on
+    stderr where simulate would choose others)."""
     if args.field is None and args.resolution is None:
         if probe is not None and getattr(probe, "auto_nodes", False):
             print(f"monitor-points: the {args.probe} probe's default {probe.n_nodes} nodes; "
                   "`lidarjax simulate` chooses nodes for the CFD field's resolution: add --field "
                   "CFD (or --resolution M) to write the same nodes", file=sys.stderr)
-        return probe
+        return [probe] * len(betas)
     if probe is None:
         raise ValueError(f"--{'field' if args.field else 'resolution'} chooses the nodes of a "
                          "probe volume; add --probe pulsed or --probe cw")
     if args.probe_nodes is not None:
         raise ValueError("--probe-nodes fixes the node count; drop it or drop --field/--resolution")
-    mounts = settings_mount(settings, betas)
     if args.resolution is not None:  # one spacing everywhere: one count (no mount needed)
-        chosen = {b: probe_for_field(types.SimpleNamespace(resolution=args.resolution), scan,
-                                     heights, probe, caller="monitor-points") for b in betas}
+        used = probe_for_field(types.SimpleNamespace(resolution=args.resolution), scan, heights,
+                               probe, caller="monitor-points")
+        probes = [used] * len(betas)
     else:
         paths = field_paths(args, betas)
         for path in paths.values():
             check_field_file(path)
-        chosen = {}
-        for k, b in enumerate(betas):  # each run over the region `lidarjax simulate` reads
+
+        def load(b, exact_at=None):  # as `lidarjax simulate --field` reads each run
             region = table_region(settings, [b], scan, probe=probe)
-            grid = load_field(paths[b], region=region)
-            chosen[b] = probe_for_field(grid, scan, heights, probe, mount=mounts[k],
-                                        caller="monitor-points")
-    counts = {b: tuple(getattr(p, "node_counts", (p.n_nodes,))) for b, p in chosen.items()}
-    if len(set(counts.values())) > 1:
-        listed = ", ".join(f"beta {b:g}: {'/'.join(map(str, n))}" for b, n in counts.items())
-        raise ValueError(f"the runs' grids give different node counts ({listed}); write the "
-                         "monitor points of one beta at a time (--beta)")
-    used = chosen[betas[0]]
-    shown = " ".join(str(n) for n in counts[betas[0]])
+            return load_field(paths[b], region=region, exact_at=exact_at)
+
+        chosen = settings_probes(settings, betas, load, scan, probe, heights=heights)
+        probes = [chosen[float(b)] for b in betas]
+    counts = [_counts(p) for p in probes]
+    if len(set(counts)) == 1:
+        shown = counts[0].replace("/", " ")
+    else:
+        shown = "; ".join(f"beta {b:g}: {c}" for b, c in zip(betas, counts, strict=True))
     print(f"probe nodes per beam: {shown} (chosen for the CFD field's resolution, as "
           "`lidarjax simulate` chooses them)", file=sys.stderr)
-    return used
+    return probes
 
 
 def run(args) -> int:
@@ -174,12 +189,13 @@ def run(args) -> int:
               file=sys.stderr)
     if args.sampled is not None:
         return _read(args)
-    settings, betas, heights, scan, probe, mounts, locs = _configuration(args)
+    settings, betas, heights, scan, probes, mounts, locs = _configuration(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     meta = {"settings": str(args.settings), "scan": args.scan,
             "cone_angle_deg": float(scan.cone_angle), "probe": args.probe,
-            "probe_nodes": args.probe_nodes, "probe_scale": args.probe_scale,
+            "probe_nodes": " ".join(f"{b:g}:{_counts(p)}" for b, p in zip(betas, probes, strict=True)),
+            "probe_scale": args.probe_scale,
             "betas_deg": " ".join(f"{b:g}" for b in betas),
             "heights_m": " ".join(f"{h:g}" for h in heights),
             "frame": "absolute CFD coordinates, m; sample U (m/s, CFD frame)"}
@@ -194,33 +210,58 @@ def run(args) -> int:
 
 
 def _read(args) -> int:
-    settings, betas, heights, scan, probe, mounts, locs = _configuration(args)
+    settings, betas, heights, scan, probes, mounts, locs = _configuration(args)
     src = Path(args.sampled)
     if src.is_file() and src.suffix.lower() == ".csv":
         values = read_monitor_values_csv(src)
+        held = np.array([n in values for n in locs.names])
+        if not held.all():
+            raise ValueError(_count_mismatch(src, len(values), held, locs, betas, probes, scan))
     else:
-        probes = read_openfoam_probes(src, field="U")
-        held = int(probes.indices.max()) + 1 if probes.indices.size else 0
-        if held != len(locs):
-            raise ValueError(_count_mismatch(src, held, locs, probe, len(betas), heights, scan))
-        values = probes.values_for(locs, time=args.time)
-    sims = simulate_from_monitor_points(locs, values, scan, mounts, heights, probe=probe,
-                                u_ref=args.u_ref)
+        foam = read_openfoam_probes(src, field="U")
+        n_held = int(foam.indices.max()) + 1 if foam.indices.size else 0
+        held, wrong = _held_at(foam, locs)
+        if n_held != len(locs) or wrong:
+            raise ValueError(_count_mismatch(src, n_held, held, locs, betas, probes, scan))
+        values = foam.values_for(locs, time=args.time)
+    sims = simulate_from_monitor_points(locs, values, scan, mounts, heights, probe=probes,
+                                        u_ref=args.u_ref)
     write_seed_results(args.out, settings, dict(zip(betas, sims, strict=True)),
                        scan=args.scan, u_ref=args.u_ref, sources=str(src),
                        settings_file=args.settings, log=print)
     return 0
 
 
-def _count_mismatch(src, held, locs, probe, n_mounts, heights, scan) -> str:
-    """The one-line error for samples of another number of points than these options give,
-    with the node count the file implies where it implies one."""
-    per = n_mounts * len(heights)
-    nodes = "focus points" if probe is None else f"{probe.n_nodes} nodes per beam"
+def _held_at(foam, locs) -> tuple[np.ndarray, bool]:
+    """``(n,)`` whether OpenFOAM's probe ``i`` is printed at point ``i`` of `locs` (to the
+    printed digits; probes the file leaves out, ``includeOutOfBounds false``, are not held),
+    and whether any probe of the file is elsewhere."""
+    held = np.zeros(len(locs), bool)
+    inside = foam.indices < len(locs)
+    idx = foam.indices[inside]
+    expected = locs.points[idx]
+    gap = np.abs(foam.header_points[inside] - expected)
+    ok = np.all(gap <= 1.01 * foam.header_resolution[inside] + 1e-12 * np.abs(expected), axis=1)
+    held[idx[ok]] = True
+    return held, bool(not ok.all() or not inside.all())
+
+
+def _count_mismatch(src, n_held, held, locs, betas, probes, scan) -> str:
+    """The one-line error for samples that are not every point these options give, rotation
+    by rotation (its node counts per height and how many of its points the file holds), with
+    the node count the file implies where it implies one."""
+    parts = []
+    for b, label, probe in zip(betas, locs.labels, probes, strict=True):
+        rows = locs.rows(label)
+        got = int(held[rows].sum())
+        state = "all held" if got == rows.size else f"{got} held there"
+        parts.append(f"beta {b:g}: {rows.size} points ({_counts(probe)} nodes per beam), {state}")
+    per = len(betas) * len(set(locs.height.tolist()))
     beams = int(scan.n_beams)
-    spare = held - per  # the column above each lidar: one point per mount and height
-    hint = "write and sample the nodes `lidarjax simulate` uses (--field CFD or --resolution M)"
+    spare = n_held - per  # the column above each lidar: one point per mount and height
+    hint = ("write and sample the nodes `lidarjax simulate` uses (--field CFD or --resolution M, "
+            "the same options when reading)")
     if spare > 0 and spare % (per * beams) == 0:
         hint = f"it was written with --probe-nodes {spare // (per * beams)}; give the same, or {hint}"
-    return (f"--sampled {src}: holds {held} probes but these options give {len(locs)} "
-            f"({nodes}); {hint}")
+    return (f"--sampled {src}: holds {n_held} probes but these options sample {len(locs)} "
+            f"({'; '.join(parts)}); {hint}")

@@ -131,8 +131,8 @@ def run(args) -> int:
         graded = any(len(set(c)) > 1 for c in nodes.values())
         print(f"probe nodes per beam: {counts} (chosen for the CFD field's resolution"
               + (" along each height's beams; " if graded else "; ")
-              + "`lidarjax monitor-points --probe pulsed --probe-nodes N` writes the same nodes"
-              + (" for the heights with N)" if graded else ")"))
+              + "`lidarjax monitor-points --probe pulsed --field` with the same --field writes "
+              "the same nodes, every beta's own)")
     why = explain_nans(sims, fields, settings, paths)
     if why:
         print(f"lidarjax simulate: warning: {why}", file=sys.stderr)

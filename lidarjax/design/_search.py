@@ -13,6 +13,8 @@ a feasible start is feasible.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -100,7 +102,11 @@ def _local(fn, problem, t0, lo, hi, solver, max_steps):
 #: options apply to this program only; JAX's configuration is not changed.
 FAST_CPU_OPTIONS = ({"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False},
                     {"xla_backend_optimization_level": 0})
-_COMPILED: dict = {}
+#: Executables of the search kept for reuse in this process (the least recently used
+#: dropped beyond this): a design run compiles one or two structures; each entry holds its
+#: objective and static configuration alive, so the cache stays small. Across processes
+#: JAX's persistent compilation cache, where enabled, serves the compilation itself.
+COMPILED_CACHE_SIZE = 8
 
 
 def _compiled_run(fn, args, statics, fast):
@@ -108,30 +114,34 @@ def _compiled_run(fn, args, statics, fast):
     on a CPU, with `FAST_CPU_OPTIONS` (the first set this jaxlib accepts)."""
     dyn, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jax.tree_util.tree_flatten(dyn)
-    key = (fn, static, treedef, tuple((x.shape, x.dtype) for x in leaves), statics, bool(fast),
-           jax.default_backend())
+    avals = tuple((x.shape, x.dtype, bool(getattr(x, "weak_type", False))) for x in leaves)
+    key = (fn, static, treedef, avals, statics, bool(fast), jax.default_backend())
     try:
-        exe = _COMPILED.get(key)
+        hash(key)
     except TypeError:  # an unhashable static part: compile without caching
-        key, exe = None, None
-    if exe is None:
-        def run(dyn):
-            return _run(fn, *eqx.combine(dyn, static), *statics)
+        return _executable.__wrapped__(*key)(dyn)
+    return _executable(*key)(dyn)
 
-        lowered = jax.jit(run).lower(dyn)
-        exe = None
-        if fast and jax.default_backend() == "cpu":
-            for options in FAST_CPU_OPTIONS:
-                try:
-                    exe = lowered.compile(compiler_options=options)
-                    break
-                except Exception:  # noqa: BLE001 - an option this jaxlib does not know
-                    continue
-        if exe is None:
-            exe = lowered.compile()
-        if key is not None:
-            _COMPILED[key] = exe
-    return exe(dyn)
+
+@functools.lru_cache(maxsize=COMPILED_CACHE_SIZE)
+def _executable(fn, static, treedef, avals, statics, fast, backend):
+    """The compiled `_run` for inputs of this structure (`_compiled_run`), lowered from
+    their shapes alone."""
+    del backend  # part of the cache key only
+
+    def run(dyn):
+        return _run(fn, *eqx.combine(dyn, static), *statics)
+
+    shapes = jax.tree_util.tree_unflatten(
+        treedef, [jax.ShapeDtypeStruct(s, d, weak_type=w) for s, d, w in avals])
+    lowered = jax.jit(run).lower(shapes)
+    if fast and jax.default_backend() == "cpu":
+        for options in FAST_CPU_OPTIONS:
+            try:
+                return lowered.compile(compiler_options=options)
+            except Exception:  # noqa: BLE001 - an option this jaxlib does not know
+                continue
+    return lowered.compile()
 
 
 def _run(fn, problem, cand, lo, hi, solver, max_steps, n_starts, batch_size, grid_shape=None):

@@ -82,6 +82,20 @@ def _labels(mounts: list[Mount], labels) -> list[str]:
     return labels
 
 
+def _probe_list(probe, n: int, caller: str) -> list[AbstractProbe]:
+    """One probe per mount: `probe` (None: the point probe) for every mount, or a sequence
+    of one per mount."""
+    probes = list(probe) if isinstance(probe, (list, tuple)) else [probe] * n
+    if len(probes) != n:
+        raise ValueError(f"{caller}: {len(probes)} probes for {n} mounts; give one probe, or "
+                         "one per mount")
+    probes = [PointProbe() if p is None else p for p in probes]
+    bad = [type(p).__name__ for p in probes if not isinstance(p, AbstractProbe)]
+    if bad:
+        raise ValueError(f"{caller}: `probe` must be a probe (or one per mount), got {bad[0]}")
+    return probes
+
+
 def _geometry(scan: Scan, mounts: list[Mount], heights: np.ndarray):
     """Beam directions ``(m, b, 3)`` (CFD frame) and focus ranges ``(m, h, b)`` in the working
     dtype, taken from `simulate` itself (one compiled call per mount on a uniform flow), so
@@ -100,7 +114,7 @@ def monitor_points(
     scan: Scan,
     mounts: Mount | Sequence[Mount],
     heights: Float[ArrayLike, " h"],
-    probe: AbstractProbe | None = None,
+    probe: AbstractProbe | Sequence[AbstractProbe] | None = None,
     *,
     point_reference: bool = True,
     labels: Sequence[str] | None = None,
@@ -111,7 +125,12 @@ def monitor_points(
 
     - `scan`, `heights` (metres above the lidar), `probe`, `point_reference`: as given to
       `simulate` (the point probe samples each beam's focus; a probe volume its quadrature
-      nodes, except nodes behind the lidar, which get no weight).
+      nodes, except nodes behind the lidar, which get no weight). `probe` with its nodes
+      chosen (`lidarjax.probe_for_field` with the mount); one probe for every mount or a
+      sequence of one per mount (platform rotations whose beams see other cells get other
+      node counts: `lidarjax.workflows.seed_tables.settings_probes`). A `GradedProbe`
+      writes every height padded to its largest count, as `lidarjax.beam.simulate_points`
+      prepares them: the padding nodes sit at the focus with weight 0.
     - `mounts`: one `Mount`, a list, or a stacked `Mount`.
     - `labels`: one name per mount (default ``b<beta>``, e.g. ``b30``); used as the prefix
       of the probe names.
@@ -123,14 +142,11 @@ def monitor_points(
     and made absolute in float64 from the mount's location, so they agree with what
     `simulate` samples to rounding.
     """
-    if probe is None:
-        probe = PointProbe()
     if not isinstance(scan, Scan):
         raise ValueError(f"monitor_points: `scan` must be a lidarjax.Scan, got {type(scan).__name__}")
-    if not isinstance(probe, AbstractProbe):
-        raise ValueError(f"monitor_points: `probe` must be a probe, got {type(probe).__name__}")
     mounts = _mount_list(mounts)
-    if not is_concrete(scan, mounts, heights, probe):
+    probes = _probe_list(probe, len(mounts), "monitor_points")
+    if not is_concrete(scan, mounts, heights, probes):
         raise ValueError("monitor_points: needs concrete inputs (call it outside jax.jit)")
     h = np.atleast_1d(np.asarray(heights, np.float64))
     if h.ndim != 1 or h.size == 0 or not np.all(np.isfinite(h)) or np.any(h <= 0):
@@ -152,7 +168,7 @@ def monitor_points(
         cols["node"].append(node)
         cols["weight"].append(weight)
 
-    for m, (mount, label) in enumerate(zip(mounts, labels, strict=True)):
+    for m, (mount, label, probe) in enumerate(zip(mounts, labels, probes, strict=True)):
         loc = np.asarray(mount.location, np.float64) + np.asarray(mount.location_lo, np.float64)
         beta = float(np.asarray(mount.beta))
         r = ranges[m]  # (h, b), working dtype
@@ -280,7 +296,7 @@ def simulate_from_monitor_points(
     mounts: Mount | Sequence[Mount],
     heights: Float[ArrayLike, " h"],
     *,
-    probe: AbstractProbe | None = None,
+    probe: AbstractProbe | Sequence[AbstractProbe] | None = None,
     u_ref=None,
     point_reference: bool = True,
     ratio_tol: float | None = None,
@@ -294,9 +310,9 @@ def simulate_from_monitor_points(
       `lidarjax.io.read_monitor_points_csv`).
     - `values`: ``(n, 3)`` velocities (m/s, CFD frame) in the order of `locations`, or a
       mapping ``name -> (u, v, w)``; NaN where the CFD code found no cell.
-    - `scan`, `mounts`, `heights`, `probe`, `point_reference`: the configuration the probes
-      were written for (checked: every point `simulate` needs must be among `locations`,
-      at the same place).
+    - `scan`, `mounts`, `heights`, `probe` (one, or one per mount), `point_reference`: the
+      configuration the probes were written for (checked: every point `simulate` needs
+      must be among `locations`, at the same place).
     - `u_ref`: free stream ``(3,)`` (CFD frame, m/s) for every mount, or ``(m, 3)`` one per
       mount; None for no ``cff_*``.
     - `tolerance`: `MonitorPointField` match distance (metres; default its own).
@@ -311,12 +327,13 @@ def simulate_from_monitor_points(
         raise ValueError("simulate_from_monitor_points: `locations` must be a MonitorPoints "
                          "(lidarjax.monitor_points or lidarjax.io.read_monitor_points_csv)")
     mounts = _mount_list(mounts)
+    probes = _probe_list(probe, len(mounts), "simulate_from_monitor_points")
     vals = _aligned_values(locations, values)
     labels = locations.labels
     if len(labels) != len(mounts):
         raise ValueError(f"simulate_from_monitor_points: the probes hold {len(labels)} mount(s) "
                          f"({', '.join(labels[:6])}), but {len(mounts)} mount(s) were given")
-    expected = monitor_points(scan, mounts, heights, probe, point_reference=point_reference,
+    expected = monitor_points(scan, mounts, heights, probes, point_reference=point_reference,
                                labels=labels)
     index = {n: i for i, n in enumerate(locations.names)}
     missing = [n for n in expected.names if n not in index]
@@ -345,11 +362,11 @@ def simulate_from_monitor_points(
         u_refs = [None] * len(mounts)
     dtype = vals.dtype if np.issubdtype(vals.dtype, np.floating) else np.float64
     sims = []
-    for mount, label, u in zip(mounts, labels, u_refs, strict=True):
+    for mount, label, u, p in zip(mounts, labels, u_refs, probes, strict=True):
         sel = expected.rows(label)
         field = MonitorPointField(expected.points[sel], vals[sel].astype(dtype),
                            origin=mount, tolerance=tolerance)
-        sims.append(simulate(field, scan, mount, heights, u_ref=u, probe=probe,
+        sims.append(simulate(field, scan, mount, heights, u_ref=u, probe=p,
                              point_reference=point_reference,
                              ratio_tol=DEFAULT_RATIO_TOL if ratio_tol is None else ratio_tol))
     return sims

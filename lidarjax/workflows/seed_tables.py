@@ -31,8 +31,8 @@ from ..progress import AbstractProgress, LineProgress, progress_meter
 from ..response import ProfileTable, ResponseTable, TableRuns
 
 __all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "table_runs",
-           "settings_mount",
-           "settings_mounts", "SEED_U_REF", "ExactPoints", "load_exact"]
+           "settings_mount", "settings_mounts", "settings_probes", "SEED_U_REF", "ExactPoints",
+           "load_exact"]
 
 #: The free stream hard-coded in the seed UDF (its CFD inlet), CFD frame, m/s.
 SEED_U_REF = (-15.0, 0.0, 0.0)
@@ -164,40 +164,102 @@ def simulate_settings(
     **Returns:** ``{beta: Simulation}``. Runs on one grid are simulated in compiled,
     vmapped batches; otherwise one call per run (one compilation per distinct grid shape).
     """
-    betas = [float(b) for b in betas]
-    if batch_size is not None:
-        batch_size = positive_size(batch_size, "simulate_settings", "batch_size")
-    mount = settings_mount(settings, betas, pitch=pitch, roll=roll)
-    heights = jnp.asarray(settings.heights())
-    # a mesh read by a loader that takes `exact_at` is exact at each rotation's own points
-    fields = [load_exact(field_for_beta, b, ExactPoints(scan, mount[k], heights, probe))
-              for k, b in enumerate(betas)]
-    n = len(betas)
-    if batch_size is None:  # the stacked copy and the vmapped temporaries of one run
-        per_run = 2 * getattr(fields[0], "nbytes", 0) + 1
-        batch_size = default_batch("rotations", per_run, n)
-    size = min(int(batch_size), n)
+    runs = _SettingsRuns(settings, betas, field_for_beta, scan, probe, pitch, roll, batch_size,
+                         "simulate_settings")
     out: dict[float, Simulation] = {}
-    for i in range(0, n, size):  # the last batch padded with its last run: one compilation
-        idx = np.minimum(np.arange(i, i + size), n - 1)
-        try:
-            # a mesh made exact at each rotation's own points is simulated per rotation: a
-            # batch chooses one node count per height for all its mounts, which need not be
-            # each rotation's own (the points prepared)
-            exact = any(isinstance(fields[k], IndexedPoints) for k in idx)
-            stacked = stack_fields([fields[k] for k in idx]) if size > 1 and not exact else None
-        except ValueError:  # runs on different grids: one call (and compilation) per grid
-            stacked = None
+    for idx, stacked in runs.batches:
         if stacked is None:
-            for k in range(i, min(i + size, n)):
-                out[betas[k]] = simulate(fields[k], scan, mount[k], heights, u_ref=u_ref,
-                                         probe=probe)
+            for k in idx:
+                out[runs.betas[k]] = simulate(runs.fields[k], scan, runs.mount[k], runs.heights,
+                                              u_ref=u_ref, probe=probe)
             continue
-        batch = simulate_rotations(stacked, scan, mount if size == n else mount[idx], heights,
+        batch = simulate_rotations(stacked, scan, runs.batch_mount(idx), runs.heights,
                                    u_refs=u_ref, probe=probe)
-        for j, k in enumerate(range(i, min(i + size, n))):
-            out[betas[k]] = jax.tree_util.tree_map(lambda a, j=j: a[j], batch)
+        for j, k in enumerate(idx):
+            out[runs.betas[k]] = jax.tree_util.tree_map(lambda a, j=j: a[j], batch)
     return out
+
+
+def settings_probes(
+    settings: Settings,
+    betas: Sequence[float],
+    field_for_beta: Callable[[float], GridField],
+    scan,
+    probe,
+    *,
+    heights=None,
+    pitch: float = 0.0,
+    roll: float = 0.0,
+    batch_size: int | None = None,
+) -> dict[float, object]:
+    """The probe, its quadrature nodes chosen, that `simulate_settings` samples each platform
+    rotation with (same arguments): ``{beta: probe}``.
+
+    The runs are loaded and batched exactly as `simulate_settings` loads and batches them, and
+    each is given `probe_for_field` as `simulate` calls it: a mesh made exact at its
+    rotation's own points is simulated per rotation (its own node counts per height, from
+    the spacing along its own beams), runs stacked on one grid share the batch's choice.
+    Rotations may therefore differ in their node counts. `heights` (m above the lidar)
+    replaces the settings' ``j * height / nh`` (the choice is per height).
+    `lidarjax monitor-points --field` writes the nodes of these probes
+    (`lidarjax.monitor_points` takes one per mount).
+    """
+    runs = _SettingsRuns(settings, betas, field_for_beta, scan, probe, pitch, roll, batch_size,
+                         "settings_probes", heights)
+    out = {}
+    for idx, stacked in runs.batches:
+        if stacked is None:
+            for k in idx:
+                out[runs.betas[k]] = probe_for_field(runs.fields[k], scan, runs.heights, probe,
+                                                     mount=runs.mount[k], caller="simulate")
+            continue
+        used = probe_for_field(stacked, scan, runs.heights, probe, mount=runs.batch_mount(idx),
+                               caller="simulate_rotations")
+        out.update({runs.betas[k]: used for k in idx})
+    return out
+
+
+class _SettingsRuns:
+    """`simulate_settings`' runs and batches (shared with `settings_probes`, so both see
+    the same batches): `betas`, the batched `mount`, `heights`, `fields` (each run loaded,
+    made exact at its rotation's points where the loader takes ``exact_at``) and `batches`,
+    ``[(run indices, stacked field or None: one call per run), ...]``."""
+
+    def __init__(self, settings, betas, field_for_beta, scan, probe, pitch, roll, batch_size,
+                 caller, heights=None):
+        self.betas = [float(b) for b in betas]
+        if batch_size is not None:
+            batch_size = positive_size(batch_size, caller, "batch_size")
+        self.mount = mount = settings_mount(settings, self.betas, pitch=pitch, roll=roll)
+        self.heights = jnp.asarray(settings.heights() if heights is None else heights)
+        # a mesh read by a loader that takes `exact_at` is exact at each rotation's own points
+        self.fields = fields = [
+            load_exact(field_for_beta, b, ExactPoints(scan, mount[k], self.heights, probe))
+            for k, b in enumerate(self.betas)]
+        n = len(self.betas)
+        if batch_size is None:  # the stacked copy and the vmapped temporaries of one run
+            per_run = 2 * getattr(fields[0], "nbytes", 0) + 1
+            batch_size = default_batch("rotations", per_run, n)
+        self.size = size = min(int(batch_size), n)
+        self.batches = []
+        for i in range(0, n, size):  # the last batch padded with its last run: one compilation
+            idx = np.minimum(np.arange(i, i + size), n - 1)
+            try:
+                # a mesh made exact at each rotation's own points is simulated per rotation: a
+                # batch chooses one node count per height for all its mounts, which need not
+                # be each rotation's own (the points prepared)
+                exact = any(isinstance(fields[k], IndexedPoints) for k in idx)
+                stacked = stack_fields([fields[k] for k in idx]) if size > 1 and not exact else None
+            except ValueError:  # runs on different grids: one call (and compilation) per grid
+                stacked = None
+            self.batches.append((range(i, min(i + size, n)), stacked))
+
+    def batch_mount(self, runs: range):
+        """The batched `Mount` of a stacked batch (padded with its last run, as its field)."""
+        if self.size == len(self.betas):
+            return self.mount
+        return self.mount[np.minimum(np.arange(runs.start, runs.start + self.size),
+                                     len(self.betas) - 1)]
 
 
 def build_table(

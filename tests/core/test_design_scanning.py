@@ -95,8 +95,11 @@ def test_vad_variance_closed_form_and_design():
     res = design_vad([50.0, 100.0], n_rays=[4, 8, 16], range_exponent=1.0, scan_time=20.0,
                      move_time=1.0, n_coarse=8)
     assert res.n_rays == 4 and abs(res.elevation - 45.0) < 0.01
-    res = design_vad([50.0], n_rays=[4, 8], scan_time=6.0, move_time=1.0, n_coarse=8)
-    assert res.n_rays == 4 and np.isnan(res.values[1])  # 8 rays leave no accumulation time
+    # (the heights and ray counts of the call above: its compiled search serves this one)
+    res = design_vad([50.0, 100.0], n_rays=[4, 8, 16], scan_time=6.0, move_time=1.0,
+                     n_coarse=8)
+    # 8 and 16 rays leave no accumulation time (6 s / n - 1 s <= 0)
+    assert res.n_rays == 4 and np.isnan(res.values[1:]).all() and np.isfinite(res.values[0])
     with pytest.raises(ValueError, match="n_rays"):
         design_vad([50.0], n_rays=[2])
     with pytest.raises(ValueError, match="points"):
