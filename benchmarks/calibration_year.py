@@ -7,7 +7,9 @@ its crest, every 10 degrees, 12 heights from 40 to 200 m, built by `lidarjax.sim
 (52,560 x 12 heights) are written by `simulate` with a truly turned and tilted `Mount`
 (north offset 1 degree, pitch 0.3, roll -0.2) and 0.1 m/s of LOS noise. Times: the first
 call in the process (compilation included) and the warm median, with and without a
-reference; the estimates against the truth as a check.
+reference, and with the table's runs (`calibrate(runs=...)`, iterating on the exact
+geometry: the table built again at the estimate); the estimates against the truth as a
+check.
 
 Writes benchmarks/results/calibration_year.json. Run from a checkout:
 ``python3 benchmarks/calibration_year.py [--repeats 3]``.
@@ -58,6 +60,13 @@ def table() -> lj.ResponseTable:
     return lj.ResponseTable.from_simulations(sims, mount=mount, fields=fields, scan=SCAN)
 
 
+def runs() -> lj.TableRuns:
+    """The same runs as `table`, for `calibrate(runs=...)` (the exact geometry)."""
+    return lj.TableRuns([ridge(d, 1.0) for d in DIRECTIONS], lj.Mount(LOC),
+                        np.stack([np.asarray(lj.heading(d)) for d in DIRECTIONS]), SCAN,
+                        HEIGHTS)
+
+
 def records(rng):
     d, u = rng.uniform(0.0, 360.0, YEAR), 9.0 * rng.weibull(2.0, YEAR) + 0.5
     mount = lj.Mount(LOC, gamma=-TRUTH[0], pitch=TRUTH[1], roll=TRUTH[2])
@@ -95,13 +104,18 @@ def main(argv=None):
                      "warm_mean_cpu_s": warm_cpu,
                      "offset_deg": [float(v) for v in np.asarray(res.offset)],
                      "std_deg": [float(v) for v in np.asarray(res.std)],
-                     "passes": int(res.num_steps), "flags": int(res.flags)}
+                     "passes": int(res.num_steps), "flags": int(res.flags),
+                     "rebuilds": int(res.rebuilds)}
         print(f"  {name}: first call {first:.2f} s ({first_cpu:.2f} cpu-s), warm {warm:.2f} s "
               f"({warm_cpu:.2f} cpu-s); offsets "
               f"{out[name]['offset_deg']} +- {out[name]['std_deg']}", flush=True)
 
     timed("calibrate_reference", lambda: lj.calibrate(los, t, reference=ref))
     timed("calibrate_no_reference", lambda: lj.calibrate(los, t))
+    # iterating on the exact geometry: the table built again at the estimate from its runs
+    r = runs()
+    timed("calibrate_reference_exact", lambda: lj.calibrate(los, t, reference=ref, runs=r))
+    timed("calibrate_no_reference_exact", lambda: lj.calibrate(los, t, runs=r))
     out["load_average_at_end"] = os.getloadavg()[0]
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "calibration_year.json").write_text(json.dumps(out, indent=1) + "\n")

@@ -134,6 +134,15 @@ def test_correct_joint_recovers_records_and_falls_back_without_profile_axis(case
     assert "--joint" in capsys.readouterr().err
 
 
+def _write_campaign(rtd, csv, los, heights, speed, direction):
+    """The records `los` ``(r, h, 5)`` as a .rtd and their free stream as a reference CSV."""
+    times = _write_rtd(rtd, los, heights)
+    lines = ["time,height_m,speed_m_s,direction_deg"]
+    for i, t in enumerate(times):
+        lines += [f"{t},{z:g},{speed[i]:.4f},{direction[i]:.4f}" for z in heights]
+    csv.write_text("\n".join(lines) + "\n")
+
+
 def test_calibrate_cli_finds_a_north_offset_with_a_reference(case, capsys):
     table = lj.io.load_table(case / "plain.npz")
     rng = np.random.default_rng(8)
@@ -144,11 +153,7 @@ def test_calibrate_cli_finds_a_north_offset_with_a_reference(case, capsys):
     # with it, --north-offset site): the table sees every direction at d - de
     los = u[:, None, None] * np.asarray(table.response_at(d - de))
     los = los + 0.02 * rng.standard_normal(los.shape)
-    times = _write_rtd(case / "c.rtd", los, h)
-    lines = ["time,height_m,speed_m_s,direction_deg"]
-    for i, t in enumerate(times):
-        lines += [f"{t},{z:g},{u[i]:.4f},{d[i]:.4f}" for z in h]
-    (case / "ref.csv").write_text("\n".join(lines) + "\n")
+    _write_campaign(case / "c.rtd", case / "ref.csv", los, h, u, d)
     out = case / "cal.json"
     assert main(["calibrate", "--table", str(case / "plain.npz"), "--records",
                  str(case / "c.rtd"), "--reference", str(case / "ref.csv"), "--wrt", "epsilon",
@@ -204,12 +209,8 @@ def test_calibrate_cli_exact_rebuilds_the_table_from_its_runs(case, capsys):
     u, d = rng.uniform(5, 12, n), rng.uniform(0, 360, n)
     los = u[:, None, None] * np.asarray(runs.table(truth).response_at(d))
     los = los + 0.02 * rng.standard_normal(los.shape)
-    h = np.asarray(table.heights)
-    times = _write_rtd(case / "exact.rtd", los, h)
-    lines = ["time,height_m,speed_m_s,direction_deg"]
-    for i, t in enumerate(times):
-        lines += [f"{t},{z:g},{u[i]:.4f},{d[i]:.4f}" for z in h]
-    (case / "exact_ref.csv").write_text("\n".join(lines) + "\n")
+    _write_campaign(case / "exact.rtd", case / "exact_ref.csv", los,
+                    np.asarray(table.heights), u, d)
     out = case / "exact.json"
     assert main(["calibrate", "--table", str(case / "plain.npz"), "--records",
                  str(case / "exact.rtd"), "--reference", str(case / "exact_ref.csv"),
