@@ -31,8 +31,9 @@ import numpy as np
 
 from .. import scan as scans
 from ..angles import wind_direction
+from ..beam import ExactPoints
 from ..footprint import scan_bounds
-from ..io import read_motion_csv, read_settings, simulate_points, write_scan_netcdf, write_table_csv
+from ..io import read_motion_csv, read_settings, write_scan_netcdf, write_table_csv
 from ..io.fields import load_field
 from ..mount import Mount
 from ..probe import PointProbe
@@ -204,9 +205,8 @@ def run(args) -> int:
         motion = read_motion_csv(args.motion)
     auto_nodes = args.probe_nodes is None and probe is not None
 
-    def points(f):  # what simulate_statistics samples (simulate's geometry and node choice)
-        used = probe_for_field(f, scan, heights, probe, caller="lidarjax series") if auto_nodes else probe
-        return simulate_points(scan, mount, heights, used)
+    # what simulate_statistics samples: simulate's geometry and node choice, with the mount
+    points = ExactPoints(scan, mount, heights, probe)
 
     # a moving lidar samples other points at every time: the graded grid of a mesh then, and
     # the whole mean flow (its excursions are not bounded here)
@@ -217,7 +217,7 @@ def run(args) -> int:
     starts = np.arange(n_rec) * RECORD_LENGTH
     if auto_nodes:  # explicit --probe-nodes kept as given
         # the nodes that resolve the box, chosen here once so that they can be shown
-        probe = probe_for_field(field, scan, heights, probe, caller="lidarjax series")
+        probe = probe_for_field(field, scan, heights, probe, mount=mount, caller="lidarjax series")
     label = f"{type(probe).__name__}, {probe.n_nodes} nodes" if probe else "point probe"
     print(f"lidarjax series: {args.scan} ({label}), {heights.size} heights, {n_rec} records; "
           f"{info}")
