@@ -221,7 +221,7 @@ def simulate_series(
       `motion`, one count at every height, the finest spacing's); the weighting is
       unchanged, and an explicit count wins. ``False`` keeps the probe's nodes as given.
       A mesh sequence prepared for this run samples the same points:
-      ``load_field_sequence(case, exact_at=lidarjax.beam.ExactPoints(scan, mount, heights,
+      ``load_field_sequence(case, exact_at=lidarjax.ExactPoints(scan, mount, heights,
       probe))``.
     - `chunk`: with a `FieldSequence`, the most LOS cycles (rows of `Series.los`) one
       compiled call simulates; default: as many as one window of snapshots spans.
@@ -260,7 +260,7 @@ def simulate_series(
                          f" SampledMotion), got {type(motion).__name__}.")
     schedule.check(scan)
     if refine_probe:
-        # with the mount, as `simulate` (and `lidarjax.beam.ExactPoints`, which prepares a
+        # with the mount, as `simulate` (and `lidarjax.ExactPoints`, which prepares a
         # mesh's points for this run) choose them: per height on a graded grid
         probe = probe_for_field(field, scan, heights, probe, mount=_fixed(mount, motion),
                                 caller="simulate_series")

@@ -301,8 +301,8 @@ class CellPointSnapshots(_Prepared, AbstractField):
 
     @property
     def nbytes(self) -> int:
-        """Bytes held by the grid's snapshots and the prepared values."""
-        return self.grid.nbytes + int(self.values.size * self.values.dtype.itemsize)
+        """Bytes held by the grid's snapshots, the prepared tetrahedra and their values."""
+        return self.grid.nbytes + self.tets.nbytes + int(self.values.size * self.values.dtype.itemsize)
 
     def _exact(self, points, time):
         """Exact snapshot values at the bracketing snapshots, the time fraction, whether the

@@ -743,7 +743,7 @@ def load_field(
     - `exact_at`: meshes (OpenFOAM cases, VTK files) only: the points `simulate` will
       sample, `(n, 3)` absolute CFD metres, or a function of the resampled `GridField`
       returning them (the probe's nodes depend on the grid's spacing along the beams:
-      ``lidarjax.beam.ExactPoints(scan, mount, heights, probe)``, `simulate`'s own choice).
+      ``lidarjax.ExactPoints(scan, mount, heights, probe)``, `simulate`'s own choice).
       The field returned is then
       a `lidarjax.io.CellPointField`: the mesh's own cellPoint interpolation (what OpenFOAM's
       `probes` report) at those points, the graded grid anywhere else. Gridded files and

@@ -333,7 +333,7 @@ def load_field_sequence(
     - `max_snapshots`: the most snapshots held at once (a window; at least 2).
     - `exact_at`: OpenFOAM only: the points the run will sample, ``(n, 3)`` absolute CFD
       metres, or a function of the first snapshot's `GridField` returning them (the probe's
-      nodes depend on its spacing along the beams: ``lidarjax.beam.ExactPoints(scan, mount,
+      nodes depend on its spacing along the beams: ``lidarjax.ExactPoints(scan, mount,
       heights, probe)`` for a fixed profiler, the nodes `lidarjax.simulate_series` chooses).
       Each window is then a `lidarjax.io.CellPointSnapshots`: at those points every
       snapshot is the mesh's own cellPoint (what OpenFOAM's `probes` report), linear in time
