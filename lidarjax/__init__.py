@@ -121,6 +121,7 @@ from .response import PeriodicSpline as PeriodicSpline
 from .response import PowerLawProfile as PowerLawProfile
 from .response import ProfileTable as ProfileTable
 from .response import ResponseTable as ResponseTable
+from .response import TableRuns as TableRuns
 from .response import UniformProfile as UniformProfile
 from .roses import CorrectionRose as CorrectionRose
 from .roses import correction_rose as correction_rose

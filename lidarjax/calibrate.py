@@ -42,9 +42,18 @@ the Jacobian), which also includes the displacement's cross term
 ``(n_b' - n_b) . G (r (n_b' - n_b))``. What is left
 out is the flow's curvature over the displacement, ``(r |n' - n|)^2 |grad grad V| / 2``: of
 second order in the offsets, about 1e-4 of the tilt's effect for 2 degrees over a ridge of
-200 m half width, and a few 1e-3 for north offsets of 10 degrees. For larger offsets
-rebuild the table at the estimate (`Calibration.value`) and calibrate again: the offsets
-then left are small and the linearisation error falls quadratically.
+200 m half width, and a few 1e-3 for north offsets of 10 degrees; next to a body (the
+hemisphere platform's roof) a tenth to a half of a standard error of a 400-record campaign.
+
+**Iterating on the exact geometry.** Given the table's CFD runs (``runs=``, a
+`lidarjax.TableRuns`), `calibrate` removes that error: after a fit it builds the table again
+for the instrument at the estimate (`TableRuns.table`: `lidarjax.simulate` of every run with
+the beams turned and tilted, so every measurement point is where the estimate puts it) and
+fits the offsets left, which are small, so the linearisation's error falls quadratically;
+it stops once a fit moves no reported offset by more than `REFINE_SHARE` of its standard
+error (at most `refinements` rebuilds; usually two). Without a reference, the nuisance turn
+(below) is built into the geometry once, from the first fit, and kept to first order about
+it afterwards: fed back, its flat direction makes the rebuilds cycle.
 
 With ``north_offset="site"`` (the flow turns with the instrument, as the distortion of a
 platform that carries it) the north offset is a shift of the direction labels instead,
@@ -105,7 +114,14 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from ._precision import HIGHEST, is_concrete
 from .flags import InverseFlag
 from .frames import rotation_z, tilt_rotation
-from .response import ProfileTable, ResponseTable, _spline_coefficients, spline_at, tabulated_start
+from .response import (
+    ProfileTable,
+    ResponseTable,
+    TableRuns,
+    _spline_coefficients,
+    spline_at,
+    tabulated_start,
+)
 
 __all__ = ["Calibration", "calibrate", "CALIBRATION_PARAMETERS"]
 
@@ -115,8 +131,21 @@ CALIBRATION_PARAMETERS = ("epsilon", "pitch", "roll")
 #: Largest change of (epsilon, pitch, roll) per Gauss--Newton pass, degrees (a trust region).
 _MAX_STEP = np.array([5.0, 1.0, 1.0])
 
-#: Gauss--Newton stops, converged, once no offset moved more than this in a pass, degrees.
+#: Gauss--Newton stops, converged, once no reported offset moved in a pass by more than
+#: this share of its standard error (``sigma sqrt((H^-1)_ii)``, the model's), or by less
+#: than `TOLERANCE` degrees. The same rule, with `REFINE_SHARE`, ends the rebuilds of the
+#: table at the estimate.
+STEP_SHARE = 1e-2
+
+#: Steps below this many degrees count as converged whatever the standard errors.
 TOLERANCE = 1e-7
+
+#: With the table's runs (`calibrate(runs=...)`), the table is built again at the estimate
+#: until a rebuild moves no reported offset by more than this share of its standard error.
+REFINE_SHARE = 0.01
+
+#: Most rebuilds of the table at the estimate (`calibrate`'s `refinements`), by default.
+REFINEMENTS = 3
 
 #: A free offset is identifiable when the normalised reduced matrix's smallest eigenvalue
 #: along it exceeds this fraction of the largest (offsets correlated beyond 0.9999 are not).
@@ -157,10 +186,15 @@ class Calibration(eqx.Module):
     - `noise`: RMS LOS residual per beam, m/s; `n_records`, `n_problems`: records and
       record-heights used.
     - `flags`: `InverseFlag` bits: ``NOT_CONVERGED`` (the offsets still moved by more than
-      `TOLERANCE` degrees in the last pass, or a number is not finite),
+      `STEP_SHARE` of their standard errors (and `TOLERANCE` degrees) in the last pass, or a
+      number is not finite, or with `runs` the
+      last rebuild of the table still moved them by more than `REFINE_SHARE` of their
+      standard errors),
       ``ILL_CONDITIONED`` (an asked-for offset is not identifiable); `converged` reads it.
-    - `num_steps`: Gauss--Newton passes taken; `last_step`: the largest change of an
-      offset in the last pass, degrees.
+    - `num_steps`: Gauss--Newton passes taken (in the last fit); `last_step`: the largest
+      change of an offset in the last pass, degrees.
+    - `rebuilds`: how often the table was built again at the estimate (`calibrate`'s
+      `runs`; 0 without).
     - `notes`: what the records could not tell, and the model's order, in words.
     """
 
@@ -179,6 +213,7 @@ class Calibration(eqx.Module):
     flags: Int[Array, ""]
     num_steps: Int[Array, ""]
     last_step: Float[Array, ""]
+    rebuilds: Int[Array, ""]
     notes: tuple[str, ...] = eqx.field(static=True)
 
     @property
@@ -347,6 +382,7 @@ class _Solution(eqx.Module):
     n_records: Int[Array, ""]
     num_steps: Int[Array, ""]
     last_step: Float[Array, ""]
+    converged: Bool[Array, ""]
 
 
 def _start(model: _CalibrationModel, problems: _Problems, with_ref: bool):
@@ -367,12 +403,14 @@ def _start(model: _CalibrationModel, problems: _Problems, with_ref: bool):
 
 
 @eqx.filter_jit
-def _solve(model: _CalibrationModel, problems: _Problems, free, weak, max_passes, n_records,
-           with_ref):
+def _solve(model: _CalibrationModel, problems: _Problems, free, weak, anchor, theta0,
+           max_passes, n_records, with_ref):
     """Schur-complement Gauss--Newton over the offsets (mask `free` of 3) and every
     problem's nuisances, `S` relinearised at every pass; see the module docstring. The
-    offsets in `weak` (a subset of `free`) are held near 0 by a ridge of `RIDGE` times the
-    largest diagonal of the reduced matrix where the records cannot tell them."""
+    offsets in `weak` (a subset of `free`) are held near `anchor` (``(3,)`` degrees: 0, or
+    the first table's installation when the table was built again at an estimate) by a
+    ridge of `RIDGE` times the largest diagonal of the reduced matrix where the records
+    cannot tell them. The offsets start at `theta0` ``(3,)`` degrees."""
     dtype = problems.los.dtype
     w = problems.weights
     freef = free.astype(dtype)
@@ -399,11 +437,10 @@ def _solve(model: _CalibrationModel, problems: _Problems, free, weak, max_passes
     limit = jnp.asarray(_MAX_STEP, dtype)
     zero = jnp.zeros((), dtype)
 
-    def step(carry):
-        # one evaluation per pass: the statistics of the point it is at, then the step
-        it, nuisance, theta, _, _ = carry
+    def evaluate(nuisance, theta, it):
+        """The statistics at a point (`_Solution`) and what its step needs."""
         resid, h_i, s_i, ainv, gn, c, ok = pieces(nuisance, theta)
-        hmat, g = jnp.sum(h_i, 0), jnp.sum(s_i, 0)
+        hmat = jnp.sum(h_i, 0)
         # the sandwich's meat: per record, the sum of its problems' reduced gradients
         s_rec = jax.ops.segment_sum(s_i, problems.record, num_segments=n_records)
         sol = _Solution(
@@ -414,11 +451,19 @@ def _solve(model: _CalibrationModel, problems: _Problems, free, weak, max_passes
             n_used=jnp.sum(jnp.any(w > 0, -1) & ok),
             n_records=jnp.sum(jax.ops.segment_max(jnp.any(w > 0, -1), problems.record,
                                                   num_segments=n_records)),
-            num_steps=it, last_step=zero)
+            num_steps=it, last_step=zero, converged=jnp.asarray(False))
+        return sol, (jnp.sum(s_i, 0), ainv, gn, c, ok)
+
+    def step(carry):
+        # one evaluation per pass: the statistics of the point it is at, then the step
+        it, nuisance, theta, _, sol_kept, kept = carry
+        nuis_k, theta_k, wrss_k = kept  # the last point accepted
+        sol, (g, ainv, gn, c, ok) = evaluate(nuisance, theta, it)
+        hmat = sol.hessian
         ridge = weakf * (RIDGE * jnp.max(jnp.diagonal(hmat) * freef))
         hm = (hmat * freef[:, None] * freef[None, :] + eye * (1.0 - freef)[:, None]
               + jnp.diag(ridge))
-        g = g - ridge * theta
+        g = g - ridge * (theta - anchor)
         # a trust region: at most 5 degrees of north offset and 1 degree of tilt per pass
         dtheta = jnp.clip(jnp.linalg.solve(hm, g * freef), -limit, limit)
         dnuis = jnp.einsum("nij,nj->ni", ainv, gn - jnp.einsum("nij,j->ni", c, dtheta))
@@ -426,24 +471,44 @@ def _solve(model: _CalibrationModel, problems: _Problems, free, weak, max_passes
         # convergence is judged on the offsets reported: a nuisance offset (epsilon without
         # a reference) that the records hardly tell creeps on for passes while moving the
         # reported ones by far less than their rounding
-        moved = jnp.max(jnp.abs(dtheta) * freef * (1.0 - weakf))
-        return it + 1, nuisance + dnuis, theta + dtheta, moved, sol
+        # (in units of the larger of `TOLERANCE` and `STEP_SHARE` standard errors)
+        sd = jnp.sqrt(sol.wrss / jnp.maximum(sol.n_obs, 1)
+                      * jnp.abs(jnp.diagonal(jnp.linalg.inv(hm))))
+        scale = jnp.maximum(STEP_SHARE * jnp.where(jnp.isfinite(sd), sd, 0.0), TOLERANCE)
+        moved = jnp.max(jnp.abs(dtheta) / scale * freef * (1.0 - weakf))
+        moved_deg = jnp.max(jnp.abs(dtheta) * freef * (1.0 - weakf))
+        # a step that made the objective (with the nuisance offset's ridge) worse is halved
+        # back towards the last point accepted: a nuisance offset the records hardly tell
+        # can make the Gauss--Newton steps overshoot and cycle
+        penalty = lambda th: jnp.sum(ridge * (th - anchor) ** 2)  # noqa: E731
+        obj, obj_k = sol.wrss + penalty(theta), wrss_k + penalty(theta_k)
+        worse = (it > 0) & (obj > obj_k + 1e-10 * jnp.abs(obj_k))
+        pick = lambda bad, good: jax.tree_util.tree_map(  # noqa: E731
+            lambda x, y: jnp.where(worse, x, y), bad, good)
+        inf = jnp.asarray(jnp.inf, dtype)
+        nxt_nuis, nxt_theta, last, sol_out, kept_out = pick(
+            (0.5 * (nuis_k + nuisance), 0.5 * (theta_k + theta), (inf, inf), sol_kept, kept),
+            (nuisance + dnuis, theta + dtheta, (moved, moved_deg), sol,
+             (nuisance, theta, sol.wrss)))
+        return it + 1, nxt_nuis, nxt_theta, last, sol_out, kept_out
 
     def going(carry):
-        it, _, _, last, _ = carry
+        it, _, _, (last, _), _, _ = carry
         # at least three passes (the nuisances settle), then until the offsets stop moving
-        return (it < max_passes) & ((it < 3) | ~(last < TOLERANCE))
+        return (it < max_passes) & ((it < 3) | ~(last < 1.0))
 
     nuisance0 = _start(model, problems, with_ref)
-    theta0 = jnp.zeros(3, dtype)
-    empty = jax.eval_shape(lambda: step((jnp.asarray(0), nuisance0, theta0, zero, None))[4])
+    theta0 = (theta0 * freef).astype(dtype)
+    inf = jnp.asarray(jnp.inf, dtype)
+    kept0 = (nuisance0, theta0, inf)
+    empty = jax.eval_shape(lambda: evaluate(nuisance0, theta0, jnp.asarray(0))[0])
     empty = jax.tree_util.tree_map(lambda x: jnp.zeros(x.shape, x.dtype), empty)
-    start = (jnp.asarray(0), nuisance0, theta0, jnp.asarray(jnp.inf, dtype), empty)
-    passes, _, theta, last, sol = jax.lax.while_loop(going, step, start)
+    start = (jnp.asarray(0), nuisance0, theta0, (inf, inf), empty, kept0)
+    passes, _, theta, (last, last_deg), sol, _ = jax.lax.while_loop(going, step, start)
     # the statistics are those of the last pass's starting point, which the last step (below
-    # TOLERANCE when converged) moved by less than the offsets' rounding matters for
-    return eqx.tree_at(lambda x: (x.theta, x.num_steps, x.last_step), sol,
-                       (theta, passes, last))
+    # STEP_SHARE of the standard errors when converged) moved by less than they matter for
+    return eqx.tree_at(lambda x: (x.theta, x.num_steps, x.last_step, x.converged), sol,
+                       (theta, passes, last_deg, last < 1.0))
 
 
 # ------------------------------------------------------------------------------------------
@@ -638,13 +703,20 @@ def _covariance(sol: _Solution, free, weak, with_ref, n_rec, covariance):
     return ident, cov, sigma2
 
 
-def _result(names, sol, free, ident, cov, sigma2, nominal, header, n_rec, notes, dtype):
-    """The `Calibration` of the offsets `names` from the solution."""
+def _result(names, sol, free, ident, cov, sigma2, nominal, header, n_rec, notes, dtype, *,
+            rebuilds=0, refined=True):
+    """The `Calibration` of the offsets `names` from the solution (`refined`: the iteration
+    on the exact geometry, where there was one, settled)."""
     theta = np.asarray(sol.theta, np.float64)
     last = float(sol.last_step)
-    converged = math.isfinite(last) and last < TOLERANCE and bool(np.all(np.isfinite(theta)))
+    fitted = bool(sol.converged) and bool(np.all(np.isfinite(theta)))
+    converged = fitted and refined
     notes = list(notes)
-    if not converged:
+    if fitted and not refined:
+        notes.append(f"the iteration on the exact geometry did not settle in {rebuilds} "
+                     "rebuilds of the table (see the model line): the offsets are the last "
+                     "iterate; allow more refinements")
+    elif not converged:
         notes.append(f"did not converge in {int(sol.num_steps)} passes (offsets still moving "
                      f"by {last:.2g} deg): these records do not determine the offsets; the "
                      "values are the last iterate, not an estimate")
@@ -668,7 +740,41 @@ def _result(names, sol, free, ident, cov, sigma2, nominal, header, n_rec, notes,
         covariance=f(cov), correlation=f(corr), identifiable=jnp.asarray(ident[sel]),
         header=f([header.get(x, math.nan) for x in names]), noise=f(math.sqrt(sigma2)),
         n_records=i32(n_rec), n_problems=i32(int(sol.n_used)), flags=i32(flags),
-        num_steps=i32(int(sol.num_steps)), last_step=f(last), notes=tuple(notes))
+        num_steps=i32(int(sol.num_steps)), last_step=f(last), rebuilds=i32(rebuilds),
+        notes=tuple(notes))
+
+
+def _check_runs(runs, table, refinements) -> None:
+    """`calibrate`'s `runs` and `refinements` checked against the table, before computing."""
+    if not isinstance(runs, TableRuns):
+        raise ValueError("calibrate: `runs` must be a lidarjax.TableRuns (the table's CFD runs, "
+                         f"fields, mounts, free streams, scan, heights), got "
+                         f"{type(runs).__name__}.")
+    if int(refinements) != refinements or refinements < 0:
+        raise ValueError(f"calibrate: `refinements` must be a whole number >= 0, got "
+                         f"{refinements!r}.")
+    h, b = table.n_heights, table.n_beams
+    if (runs.heights.shape[0], runs.scan.n_beams) != (h, b) or (
+            table.heights is not None and not np.allclose(np.asarray(runs.heights),
+                                                          np.asarray(table.heights))):
+        raise ValueError(f"calibrate: `runs` simulate heights {np.asarray(runs.heights).tolist()}"
+                         f" and {runs.scan.n_beams} beams, the table "
+                         f"{None if table.heights is None else np.asarray(table.heights).tolist()}"
+                         f" and {b}; give the runs the table was built from (runs.table()).")
+
+
+def _refined_note(rebuilds: int, moved: float, refinements: int) -> str:
+    """`Calibration.notes`' line on the iteration on the exact geometry."""
+    if rebuilds == 0 and moved <= TOLERANCE:
+        return ("model: exact geometry (the table's runs at the installation; the offsets "
+                "from it below the tolerance)")
+    head = (f"model: iterated on the exact geometry, the table built again from its runs at "
+            f"the estimate {rebuilds} time(s); ")
+    if math.isfinite(moved):
+        return head + (f"the last fit moved the offsets by {moved:.2g} deg" +
+                       ("" if rebuilds < refinements else
+                        f" (the most of {refinements} rebuilds allowed)"))
+    return head + "the last fit gave no finite offsets"
 
 
 def calibrate(
@@ -682,6 +788,8 @@ def calibrate(
     iterations: int = 12,
     covariance: str = "robust",
     north_offset: str = "instrument",
+    runs: TableRuns | None = None,
+    refinements: int = REFINEMENTS,
 ) -> Calibration:
     """Constant installation offsets (north offset, pitch, roll) from many records.
 
@@ -708,8 +816,10 @@ def calibrate(
     - `min_beams`: fewest usable beams for a record-height to count (default 3).
     - `iterations`: most Gauss--Newton passes over the records (default 12; each pass
       updates the offsets, by at most 5 degrees of epsilon and 1 degree of tilt, and every
-      record-height's free stream; it stops once the offsets move less than `TOLERANCE`,
-      1e-7 degrees, which is also what `Calibration.converged` asks).
+      record-height's free stream; a step that raises the objective is halved back; it
+      stops once no reported offset moves by more than `STEP_SHARE` (1 %) of its standard
+      error, or less than `TOLERANCE` degrees, which is also what
+      `Calibration.converged` asks).
     - `covariance`: ``"robust"`` (record-clustered sandwich, default) or ``"model"``
       (``sigma**2 H^-1``); see the module docstring.
     - `north_offset`: what a north offset is. ``"instrument"`` (default): the instrument is
@@ -718,6 +828,19 @@ def calibrate(
       instrument (a lidar and the platform distorting its flow share a heading error):
       every direction label is shifted, ``R(d - d_epsilon)``. The two agree where the
       flow does not vary in space.
+    - `runs`: optional `lidarjax.TableRuns`, the CFD runs `table` was built from
+      (``table = runs.table()``). With them `calibrate` **iterates on the exact geometry**:
+      after each fit it builds the table again for the instrument at the estimate
+      (`TableRuns.table`: every beam turned and every measurement point moved, by
+      `lidarjax.simulate` itself) and fits the offsets left, until a fit moves no reported
+      offset by more than `REFINE_SHARE` (1 %) of its standard error, at most `refinements`
+      rebuilds (default `REFINEMENTS`, 3). The linearisation's error (the flow's curvature
+      over the displacement, second order in the offsets) then falls quadratically with
+      each rebuild; without `runs` it stays (see the module docstring). The standard errors
+      are the last fit's. A last rebuild that still moved the offsets sets
+      ``NOT_CONVERGED``.
+    - `refinements`: most rebuilds with `runs` (0: only say in `notes` what the runs would
+      change, no rebuild).
 
     **Returns:** a `Calibration`. Without a reference, epsilon is NaN with
     ``identifiable = False`` and a note. Raises `ValueError` before computing for unknown
@@ -725,30 +848,72 @@ def calibrate(
     """
     names, los, ref_speed, ref_dir, header = _checked(records, table, wrt, reference,
                                                       covariance, north_offset)
+    if runs is not None:
+        _check_runs(runs, table, refinements)
     dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else table.dtype
     with_ref = reference is not None
-    problems = _flattened(los, table, weights, ref_speed, ref_dir, min_beams, with_ref, dtype)
-    model, notes = _model_of(table, dtype, north_offset)
-    if model.gradient is None:
-        warnings.warn(f"calibrate: {notes[0]}", stacklevel=2)
     free = np.array([x in names for x in CALIBRATION_PARAMETERS])
-    weak = np.zeros(3, bool)
-    if not with_ref and free[0]:
-        notes.append(_NOT_IDENTIFIABLE_EPSILON)
-        if model.turn_beams and model.gradient is not None:
-            # the turn itself is taken up by the records' directions, but where the flow
-            # varies in space it also moves the measurement points: that part is fitted (a
-            # nuisance, held by a ridge where the records cannot tell it), so that it does
-            # not go into the tilt
-            weak[0] = True
-            notes.append(_EPSILON_AS_NUISANCE)
-        else:
-            free[0] = False
-    n_records = los.shape[0]
-    sol = _solve(model, problems, jnp.asarray(free), jnp.asarray(weak),
-                 jnp.asarray(int(iterations), jnp.int32),
-                 int(n_records), bool(with_ref))
-    n_rec = int(sol.n_records)
-    ident, cov, sigma2 = _covariance(sol, free, weak, with_ref, n_rec, covariance)
-    return _result(names, sol, free & ~weak, ident, cov, sigma2, model.nominal, header,
-                   n_rec, notes, dtype)
+    nominal = None
+    total = np.zeros(3)  # the offsets of the current table's installation from the first's
+    rebuilds, moved = 0, math.inf
+    start = np.zeros(3)  # where each fit starts, degrees from the current table's installation
+    while True:
+        problems = _flattened(los, table, weights, ref_speed, ref_dir, min_beams, with_ref,
+                              dtype)
+        model, notes = _model_of(table, dtype, north_offset)
+        if nominal is None:
+            nominal = model.nominal
+            if model.gradient is None and runs is None:
+                warnings.warn(f"calibrate: {notes[0]}", stacklevel=2)
+        fit = free.copy()
+        weak = np.zeros(3, bool)
+        if not with_ref and free[0]:
+            notes.append(_NOT_IDENTIFIABLE_EPSILON)
+            if model.turn_beams and model.gradient is not None:
+                # the turn itself is taken up by the records' directions, but where the flow
+                # varies in space it also moves the measurement points: that part is fitted
+                # (a nuisance, held by a ridge where the records cannot tell it), so that it
+                # does not go into the tilt
+                weak[0] = True
+                notes.append(_EPSILON_AS_NUISANCE)
+            else:
+                fit[0] = False
+        n_records = los.shape[0]
+        # the nuisance's ridge holds it at the first table's installation, whichever table
+        # this is: every rebuild fits one objective from a new linearisation point
+        sol = _solve(model, problems, jnp.asarray(fit), jnp.asarray(weak),
+                     jnp.asarray(-total, dtype), jnp.asarray(start, dtype),
+                     jnp.asarray(int(iterations), jnp.int32),
+                     int(n_records), bool(with_ref))
+        n_rec = int(sol.n_records)
+        ident, cov, sigma2 = _covariance(sol, fit, weak, with_ref, n_rec, covariance)
+        step = np.where(fit, np.asarray(sol.theta, np.float64), 0.0)
+        if north_offset == "site":  # the table's turn is a relabelling: not accumulated
+            total[0] = 0.0
+        if weak[0] and rebuilds > 0:
+            # a nuisance turn the records hardly tell is built into the geometry once (the
+            # first fit's); later fits keep it as a first-order nuisance about that turn:
+            # fed back, its flat direction makes the rebuilds cycle
+            start[0] = step[0]  # the next fit starts at this one's nuisance turn
+            step[0] = 0.0
+        total = total + step
+        if runs is None:
+            break
+        shown = fit & ~weak & ident
+        moved = float(np.max(np.abs(step[shown]), initial=0.0))
+        std = np.sqrt(np.diag(cov)[shown])
+        small = REFINE_SHARE * float(np.min(std, initial=math.inf))
+        if not np.all(np.isfinite(step)) or moved <= max(small, TOLERANCE) \
+                or rebuilds >= refinements:
+            break
+        # iterate on the exact geometry: the table of the instrument at the estimate, from
+        # which the offsets left are small, so the linearisation's error falls quadratically
+        table = runs.table(total, north_offset)
+        rebuilds += 1
+    if runs is not None:
+        notes = [x for x in notes if not x.startswith("model:")]
+        notes.append(_refined_note(rebuilds, moved, refinements))
+    sol = eqx.tree_at(lambda x: x.theta, sol, jnp.asarray(total, sol.theta.dtype))
+    return _result(names, sol, fit & ~weak, ident, cov, sigma2, nominal, header,
+                   n_rec, notes, dtype, rebuilds=rebuilds,
+                   refined=runs is None or moved <= max(small, TOLERANCE))

@@ -346,6 +346,16 @@ def beam_gradient(
 
 @jax.jit
 def _beam_gradient_jit(field, scan, mount, heights, probe):
+    return beam_flow(field, scan, mount, heights, probe)[1]
+
+
+def beam_flow(field: AbstractField, scan: Scan, mount: Mount, heights: Float[Array, " h"],
+              probe: AbstractProbe) -> tuple[Float[Array, "h b 3"], Float[Array, "h b 3 3"]]:
+    """The velocity at each beam's measurement point (its focus, m/s) and the gradient
+    ``G`` of `beam_gradient` (1/s), both in the north frame, ``((h, b, 3), (h, b, 3, 3))``,
+    for one `mount` at `heights` (m) with `probe` (its nodes as given, see
+    `probe_for_field`). Traceable: no checks; `beam_gradient` and
+    `lidarjax.TableRuns` call it."""
     with jax.default_matmul_precision("highest"):
         dtype = field.dtype
         heights = heights.astype(dtype)
@@ -354,8 +364,10 @@ def _beam_gradient_jit(field, scan, mount, heights, probe):
         angles = jax.tree_util.tree_map(lambda a: jnp.asarray(a).astype(dtype), mount)
         n_cfd, ranges = profile_geometry(scan, mount, heights)
         q = cfd_to_north_rotation(angles)
-        return jnp.einsum("ik,hbkl,jl->hbij", q, gradient_along_beams(
+        velocity = field.sample_local(origin_local + ranges[..., None] * n_cfd)
+        gradient = jnp.einsum("ik,hbkl,jl->hbij", q, gradient_along_beams(
             field, origin_local, n_cfd, ranges, probe), q)
+        return jnp.einsum("ij,hbj->hbi", q, velocity), gradient
 
 
 def gradient_along_beams(field, origin_local, directions, ranges, probe):

@@ -44,13 +44,13 @@ from scipy.interpolate import CubicSpline
 from ._precision import default_float, is_concrete
 from ._util import compiled
 from .angles import horizontal_speed, wind_direction
-from .forward import Simulation, gradient_along_beams, probe_for_field
+from .forward import Simulation, beam_flow, gradient_along_beams, probe_for_field, simulate
 from .frames import cfd_to_north_rotation
 from .mount import Mount
 from .probe import AbstractProbe, CWProbe, PointProbe, PulsedProbe
 from .scan import Scan
 
-__all__ = ["PeriodicSpline", "ResponseTable", "Instrument", "ProfileTable", "AbstractProfile",
+__all__ = ["PeriodicSpline", "ResponseTable", "TableRuns", "Instrument", "ProfileTable", "AbstractProfile",
            "PowerLawProfile", "UniformProfile", "profile_from_metadata", "parameter_weights"]
 
 
@@ -556,6 +556,7 @@ class ResponseTable(eqx.Module):
         probe: AbstractProbe | None = None,
         instrument: Instrument | None = None,
         beam_gradient: Float[ArrayLike, "s h b 3 3"] | None = None,
+        beam_velocity: Float[ArrayLike, "s h b 3"] | None = None,
     ) -> ResponseTable:
         """A table from `lidarjax.simulate` results, one per CFD run (inflow direction).
 
@@ -576,6 +577,9 @@ class ResponseTable(eqx.Module):
           frame, 1/s) when they were computed while the fields were loaded (as
           `lidarjax.build_table` does); divided by the free-stream speed here. Not with
           `fields`.
+        - `beam_velocity`: likewise the runs' velocity at the beam points ``(s, h, b, 3)``
+          (north frame, m/s), taken while the fields were loaded (`TableRuns` does); needs
+          `mount`, not with `fields`.
         - `scan`, `probe`: the scan and probe the runs used: with them the table knows its
           `Instrument` (cone angle, beams, heights, and the mounts' epsilon and tilt), or give
           `instrument` directly.
@@ -627,14 +631,21 @@ class ResponseTable(eqx.Module):
         response = norm(stacked.los)
         reconstructed = norm(stacked.lidar_velocity)
         point = None if stacked.point_velocity is None else norm(stacked.point_velocity)
-        beam_vectors = beam_velocity = gradient = None
+        given_velocity, beam_vectors, beam_velocity, gradient = beam_velocity, None, None, None
         if beam_gradient is not None:
             if fields is not None:
                 raise ValueError("ResponseTable.from_simulations: give `fields` or "
                                  "`beam_gradient`, not both.")
             gradient = norm(np.asarray(beam_gradient, np.float64))
+        if given_velocity is not None:
+            if fields is not None or mount is None:
+                raise ValueError("ResponseTable.from_simulations: `beam_velocity` needs `mount` "
+                                 "and replaces `fields`; give one of them.")
         if mount is not None:
+            batched = None
             if isinstance(mount, Mount):
+                if mount.batch_shape:  # split on the host: not one device slice per leaf
+                    mount = batched = jax.tree_util.tree_map(np.asarray, mount)
                 mounts = list(mount) if mount.batch_shape else [mount] * s
             else:
                 mounts = list(mount)
@@ -642,7 +653,9 @@ class ResponseTable(eqx.Module):
                 raise ValueError(
                     f"ResponseTable.from_simulations: `mount` must be a Mount or {s} Mounts."
                 )
-            rot = np.stack([np.asarray(cfd_to_north_rotation(m), np.float64) for m in mounts])
+            rot = np.asarray(jax.vmap(cfd_to_north_rotation)(batched), np.float64) if (
+                batched is not None) else np.stack(
+                [np.asarray(cfd_to_north_rotation(m), np.float64) for m in mounts])
             dirs = np.asarray(stacked.directions, np.float64)  # (s, b, 3) CFD frame
             n_north = np.einsum("sij,sbj->sbi", rot, dirs)
             if not np.allclose(n_north, n_north[:1], atol=1e-6):
@@ -651,6 +664,8 @@ class ResponseTable(eqx.Module):
                     "directions in different runs; check the mounts (epsilon, psi, beta, gamma)."
                 )
             beam_vectors = n_north[0]
+            if given_velocity is not None:
+                beam_velocity = norm(np.asarray(given_velocity, np.float64))
             if fields is not None:
                 fields = list(fields)
                 if len(fields) != s:
@@ -697,6 +712,145 @@ class ResponseTable(eqx.Module):
             instrument=instrument if instrument is not None or scan is None
             else Instrument.of(scan, mount, heights[0], probe),
         )
+
+
+# ------------------------------------------------------------------------------------------
+# The runs behind a table, to build it again for another installation
+
+
+class TableRuns(eqx.Module):
+    """The CFD runs a `ResponseTable` is built from, kept so that the table can be built
+    again for the instrument turned and tilted from its nominal installation
+    (`lidarjax.calibrate` does, to iterate on the exact geometry).
+
+    **Arguments:**
+
+    - `fields`: one field per run (inflow direction), or one field shared by every run (a
+      single CFD run whose direction is varied by turning the platform, ``Mount.beta``).
+    - `mount`: the nominal installation of every run: one `Mount`, or one per run (a
+      batched `Mount` or a sequence).
+    - `u_ref`: ``(s, 3)`` (or ``(3,)`` shared) each run's free-stream velocity in its CFD
+      frame, m/s (`simulate`'s ``u_ref``): it gives the run's direction and normalises it.
+    - `scan`: the profiling `Scan`; `heights`: ``(h,)`` m above the lidar; `probe`: the
+      probe volume (default the point probe). Its nodes are chosen once, for the field and
+      the nominal mounts (`probe_for_field`), and kept for every installation, so that
+      tables at different installations differ by the geometry only.
+
+    `table(offset)` is `ResponseTable.from_simulations` of the runs with the velocity at the
+    beam points and the beam gradient, the whole set of runs one compiled program (reused
+    for every offset: the angles are dynamic).
+    """
+
+    fields: Any
+    shared_field: bool = eqx.field(static=True)
+    mounts: Mount
+    u_ref: Float[Array, "s 3"]
+    scan: Scan
+    heights: Float[Array, " h"]
+    probe: AbstractProbe
+    user_probe: AbstractProbe | None = eqx.field(static=True)
+
+    def __init__(self, fields, mount, u_ref, scan: Scan, heights, probe=None):
+        name = "TableRuns"
+        if isinstance(fields, Sequence) and not hasattr(fields, "sample_local"):
+            fields = list(fields)
+            if not fields:
+                raise ValueError(f"{name}: `fields` is empty; give one field per run or one "
+                                 "field for every run.")
+        if isinstance(mount, Mount):
+            mounts = list(mount) if mount.batch_shape else None
+        else:
+            mounts = list(mount)
+            if not mounts or not all(isinstance(m, Mount) for m in mounts):
+                raise ValueError(f"{name}: `mount` must be a lidarjax.Mount or a sequence of "
+                                 "them (one per run).")
+        u = np.asarray(u_ref, np.float64)
+        counts = {len(x) for x in (fields, mounts) if isinstance(x, list)}
+        if u.ndim == 2:
+            counts.add(u.shape[0])
+        if len(counts) > 1:
+            raise ValueError(f"{name}: `fields`, `mount` and `u_ref` must give the same number "
+                             f"of runs; got {sorted(counts)}.")
+        s = counts.pop() if counts else 1
+        if s < 3:
+            raise ValueError(f"{name}: a table needs at least 3 runs (inflow directions), got "
+                             f"{s}.")
+        if u.shape not in ((3,), (s, 3)) or not np.all(np.isfinite(u)):
+            raise ValueError(f"{name}: `u_ref` must be finite (3,) or ({s}, 3) m/s, got shape "
+                             f"{u.shape}.")
+        if mounts is None:
+            mounts = [mount] * s
+        if isinstance(fields, list) and len(fields) == 1:
+            fields = fields[0]
+        shared = not isinstance(fields, list) or all(f is fields[0] for f in fields)
+        if shared and isinstance(fields, list):
+            fields = fields[0]
+        if not shared:
+            first = jax.tree_util.tree_structure(fields[0])
+            if any(jax.tree_util.tree_structure(f) != first for f in fields[1:]):
+                raise ValueError(f"{name}: the runs' fields differ in kind or shape; give "
+                                 "fields of one kind and grid (load every run on one grid).")
+            fields = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *fields)
+        self.fields = fields
+        self.shared_field = shared
+        self.mounts = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *mounts)
+        self.u_ref = jnp.asarray(np.broadcast_to(u, (s, 3)))
+        self.scan = scan
+        self.heights = jnp.atleast_1d(jnp.asarray(heights, jnp.result_type(float)))
+        self.user_probe = probe
+        first_field = fields if shared else jax.tree_util.tree_map(lambda a: a[0], fields)
+        self.probe = probe_for_field(first_field, scan, self.heights,
+                                     PointProbe() if probe is None else probe,
+                                     mount=self.mounts, caller=name)
+
+    @property
+    def n_runs(self) -> int:
+        return int(self.u_ref.shape[0])
+
+    def mounts_at(self, offset=(0.0, 0.0, 0.0), north_offset: str = "instrument") -> Mount:
+        """The runs' mounts with the instrument turned and tilted by `offset` ``(d_epsilon,
+        d_pitch, d_roll)`` degrees from the nominal installation, as `lidarjax.calibrate`
+        defines the offsets: pitch and roll grow by ``d_pitch``, ``d_roll``; with
+        ``north_offset="instrument"`` the instrument turns on its site so that every beam's
+        bearing grows by ``d_epsilon`` (``gamma - d_epsilon``) while its reported north stays
+        (``epsilon + d_epsilon``: `lidarjax.frames.cfd_to_north_rotation` unchanged); with
+        ``"site"`` the turn is a relabelling of directions and the mounts do not turn.
+        Batched over the runs."""
+        off = jnp.asarray(offset)
+        de = off[0] if north_offset == "instrument" else jnp.zeros_like(off[0])
+        m = self.mounts
+        return eqx.tree_at(lambda x: (x.gamma, x.epsilon, x.pitch, x.roll), m,
+                           (m.gamma - de, m.epsilon + de, m.pitch + off[1], m.roll + off[2]))
+
+    def table(self, offset=(0.0, 0.0, 0.0), north_offset: str = "instrument"
+              ) -> ResponseTable:
+        """The `ResponseTable` of the instrument at `offset` (degrees, see `mounts_at`) from
+        its nominal installation: LOS response, reconstructed vector, point reference, the
+        velocity at the beam points and the beam gradient, from `simulate` of every run."""
+        if north_offset not in ("instrument", "site"):
+            raise ValueError("TableRuns.table: `north_offset` must be 'instrument' or 'site', "
+                             f"got {north_offset!r}.")
+        dtype = self.u_ref.dtype
+        mounts = self.mounts_at(jnp.asarray(offset, dtype), north_offset)
+        sims, velocity, gradient = _runs_program(self.fields, self.shared_field, mounts,
+                                                 self.u_ref, self.scan, self.heights,
+                                                 self.probe)
+        return ResponseTable.from_simulations(
+            sims, mount=mounts, scan=self.scan, probe=self.user_probe,
+            beam_velocity=velocity, beam_gradient=gradient)
+
+
+@eqx.filter_jit
+def _runs_program(fields, shared, mounts, u_ref, scan, heights, probe):
+    """Every run of a `TableRuns` at once: the stacked `Simulation`s, the velocity at the
+    beam points and the beam gradient (north frame, m/s and 1/s)."""
+
+    def run(field, mount, u):
+        sim = simulate(field, scan, mount, heights, u_ref=u, probe=probe)
+        velocity, gradient = beam_flow(field, scan, mount, heights, probe)
+        return sim, velocity, gradient
+
+    return jax.vmap(run, in_axes=(None if shared else 0, 0, 0))(fields, mounts, u_ref)
 
 
 # ------------------------------------------------------------------------------------------

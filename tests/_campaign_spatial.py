@@ -44,6 +44,7 @@ puts the repository root on ``sys.path``).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from functools import cache
 from pathlib import Path
@@ -201,6 +202,18 @@ def table(s: Setting, n_directions: int = 36, **kwargs) -> lj.ResponseTable:
                                              scan=SCAN, **kwargs)
 
 
+def runs(s: Setting, n_directions: int = 36) -> lj.TableRuns:
+    """The site's runs behind `table` (`lidarjax.TableRuns`: the same directions, fields,
+    nominal mounts and free streams), for `lidarjax.calibrate`'s iteration on the exact
+    geometry; ``runs(s).table()`` is `table(s)`."""
+    dirs = np.arange(n_directions) * (360.0 / n_directions)
+    flows = [_flow(s, 1.0, d) for d in dirs]
+    return lj.TableRuns([f for f, *_ in flows],
+                        [lj.Mount(s.location, beta=float(b)) for _, b, _, _ in flows],
+                        np.stack([np.asarray(u, np.float64) for *_, u, _ in flows]), SCAN,
+                        s.heights)
+
+
 @cache
 def _table_program(s: Setting):
     """The table's runs ``(s,)`` at unit free-stream speed, one compiled program."""
@@ -238,25 +251,30 @@ def campaigns(s: Setting, rng: np.random.Generator, n_campaigns: int, n_records:
             "ref_direction": np.broadcast_to(d[..., None], (c, n, h))}
 
 
-def estimate(table, camp: dict, *, reference: bool, calibrate=None) -> dict:
+def estimate(table, camp: dict, *, reference: bool, calibrate=None, runs=None) -> dict:
     """`lidarjax.calibrate` (or the given `calibrate`) on every campaign, with or without the
-    reference: ``z = (estimate - truth) / std`` ``(c, k)`` for the identifiable offsets
-    (epsilon only with a reference), the estimates, standard errors and truths, and
-    whether each converged."""
+    reference (and with the table's `runs`, iterating on the exact geometry, when given):
+    ``z = (estimate - truth) / std`` ``(c, k)`` for the identifiable offsets (epsilon only
+    with a reference), the estimates, standard errors and truths, and whether each
+    converged."""
     cal = lj.calibrate if calibrate is None else calibrate
+    if runs is not None:
+        cal = functools.partial(cal, runs=runs)
     sel = [0, 1, 2] if reference else [1, 2]
-    est, std, conv = [], [], []
+    est, std, conv, rebuilds = [], [], [], []
     for i in range(camp["los"].shape[0]):
         ref = (camp["ref_speed"][i], camp["ref_direction"][i]) if reference else None
         res = cal(camp["los"][i], table, reference=ref)
         est.append(np.asarray(res.offset)[sel])
         std.append(np.asarray(res.std)[sel])
         conv.append(bool(res.converged))
+        rebuilds.append(int(getattr(res, "rebuilds", 0)))
     est, std = np.array(est), np.array(std)
     truth = camp["offsets"][:, sel]
     names = ("epsilon", "pitch", "roll")
     return {"names": [names[j] for j in sel], "estimate": est, "std": std, "truth": truth,
-            "z": (est - truth) / std, "converged": np.array(conv)}
+            "z": (est - truth) / std, "converged": np.array(conv),
+            "rebuilds": np.array(rebuilds)}
 
 
 def summary(z: np.ndarray, truth: np.ndarray) -> dict:

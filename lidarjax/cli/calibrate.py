@@ -14,7 +14,8 @@ import numpy as np
 
 from .._util import atomic_path
 from ..calibrate import CALIBRATION_PARAMETERS, calibrate
-from ..io import load_table
+from ..io import load_table, read_settings
+from ..io.fields import check_field_file, load_field
 from ..response import ProfileTable
 from ..workflows.records import (
     DEFAULT_MIN_AVAILABILITY,
@@ -22,7 +23,8 @@ from ..workflows.records import (
     match_heights,
     subset_table,
 )
-from ._common import check_output_file, finite_float
+from ..workflows.seed_tables import SEED_U_REF, table_runs
+from ._common import check_output_file, finite_float, make_probe, make_scan
 
 
 def _wrt(text: str) -> tuple[str, ...]:
@@ -68,6 +70,13 @@ def register(sub) -> None:
                           "(default the middle of its range)")
     cal.add_argument("--min-availability", type=finite_float, default=None,
                      help="records below this availability (percent) are not used (default 80)")
+    cal.add_argument("--exact", action="store_true",
+                     help="iterate on the exact geometry: read the table's CFD runs again "
+                          "(the settings and field files its metadata names, cropped to where "
+                          "an instrument turned by up to 15 and tilted by up to 3 degrees "
+                          "looks, all held in memory), build the table at each estimate and "
+                          "fit what is left (lidarjax.calibrate(runs=...)); meshes are sampled "
+                          "on their resampling grid, the table too")
     cal.add_argument("--out", default=None, help="write the result as JSON")
     cal.set_defaults(func=run)
 
@@ -98,6 +107,43 @@ def _reference(path: Path, times: np.ndarray, heights: np.ndarray):
     return speed, direction
 
 
+def _table_runs(meta: dict, heights: np.ndarray):
+    """The `lidarjax.TableRuns` of a table file written by `lidarjax table`, from its
+    metadata (settings file, one CFD file per platform rotation, scan, probe, installation,
+    free stream) at the calibration's `heights` (m)."""
+    settings_path = Path(meta.get("settings", ""))
+    if not settings_path.is_file():
+        raise FileNotFoundError(f"--exact: the table's settings file is gone: {settings_path}")
+    settings = read_settings(settings_path).with_heights(heights)
+    files = {float(k): Path(v) for k, v in meta["cfd_files"].items()}
+    missing = [str(p) for p in files.values() if not (p.is_file() or p.is_dir())]
+    if missing:
+        raise FileNotFoundError(f"--exact: the table's CFD files are gone: {', '.join(missing)}")
+    for p in set(files.values()):
+        check_field_file(p)
+    betas = [float(b) for b in settings.betas]
+    paths = {b: files[min(files, key=lambda k: abs(k - b))] for b in betas}
+    scan = make_scan(meta["scan"], meta.get("cone_angle_deg"),
+                     tilt_compensation=bool(meta.get("tilt_compensation", False)))
+    kind = meta.get("probe", "point")
+    volume = kind != "point"
+    probe = make_probe(SimpleNamespace(probe=kind,
+                                       probe_nodes=meta.get("probe_nodes") if volume else None,
+                                       probe_scale=meta.get("probe_scale") if volume else None))
+    loaded = {}
+
+    def field_for_beta(beta):  # one read per file, however many rotations share it
+        p = paths[beta]
+        if p not in loaded:
+            loaded[p] = load_field(p)
+        return loaded[p]
+
+    return table_runs(settings, betas, field_for_beta, scan,
+                      u_ref=tuple(meta.get("u_ref_cfd_m_s", SEED_U_REF)), probe=probe,
+                      pitch=float(meta.get("pitch_deg", 0.0)),
+                      roll=float(meta.get("roll_deg", 0.0)))
+
+
 def run(args) -> int:
     def say(text):
         print(f"lidarjax calibrate: {text}", file=sys.stderr)
@@ -112,7 +158,11 @@ def run(args) -> int:
         check_output_file(Path(args.out), inputs=[("--table", args.table)] + [
             ("--records", f) for f in files])
     table, meta = load_table(args.table, return_metadata=True)
-    if isinstance(table, ProfileTable):
+    over_parameter = isinstance(table, ProfileTable)
+    if over_parameter and args.exact:
+        raise ValueError(f"--exact: {args.table} is a table over {table.name}: its runs are "
+                         "not one set of CFD runs; calibrate without --exact")
+    if over_parameter:
         value = args.parameter if args.parameter is not None else float(
             0.5 * (table.parameters[0] + table.parameters[-1]))
         say(f"table over {table.name}: calibrating at {table.name} = {value:g}")
@@ -151,8 +201,16 @@ def run(args) -> int:
     # what calibrate reads: the LOS and the header's tilt
     recs = SimpleNamespace(los=los, pitch=header.get("pitch", math.nan),
                            roll=header.get("roll", math.nan))
+    runs = None
+    if args.exact:
+        if "cfd_files" not in meta or "settings" not in meta:
+            raise ValueError(f"--exact: {args.table} does not name its CFD runs (not written "
+                             "by `lidarjax table`); calibrate without --exact")
+        say("--exact: reading the table's CFD runs again ...")
+        runs = _table_runs(meta, z)
+        sub = runs.table()
     result = calibrate(recs, sub, wrt=args.wrt, reference=reference,
-                       north_offset=args.north_offset)
+                       north_offset=args.north_offset, runs=runs)
     print(f"calibration from {int(result.n_records)} records x {sub.n_heights} heights "
           f"({int(result.n_problems)} record-heights used); LOS residual "
           f"{float(result.noise):.3f} m/s")
@@ -177,7 +235,7 @@ def run(args) -> int:
             "n_records": int(result.n_records), "n_problems": int(result.n_problems),
             "noise_m_s": float(result.noise), "converged": result.converged,
             "flags": int(result.flags), "passes": int(result.num_steps),
-            "north_offset": args.north_offset,
+            "north_offset": args.north_offset, "rebuilds": int(result.rebuilds),
             "notes": list(result.notes),
         }
         with atomic_path(Path(args.out)) as tmp:

@@ -12,6 +12,7 @@ import inspect
 import time
 from collections.abc import Callable, Sequence
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -27,9 +28,10 @@ from ..forward import Simulation, beam_gradient, simulate
 from ..io.settings import Settings
 from ..mount import Mount
 from ..progress import AbstractProgress, LineProgress, progress_meter
-from ..response import ProfileTable, ResponseTable
+from ..response import ProfileTable, ResponseTable, TableRuns
 
-__all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "settings_mount",
+__all__ = ["seed_columns", "simulate_settings", "build_table", "table_region", "table_runs",
+           "settings_mount",
            "settings_mounts", "SEED_U_REF", "ExactPoints", "load_exact"]
 
 #: The free stream hard-coded in the seed UDF (its CFD inlet), CFD frame, m/s.
@@ -284,6 +286,44 @@ def table_region(settings: Settings, betas: Sequence[float], scan, *, probe=None
 
     mount = settings_mount(settings, [float(b) for b in betas], pitch=pitch, roll=roll)
     return scan_bounds(scan, mount, np.asarray(settings.heights()), probe=probe)
+
+
+#: How far `table_runs`' crop reaches beyond the nominal installation: tilt and turn,
+#: degrees (the offsets `lidarjax.calibrate` can move the instrument to).
+RUNS_MAX_TILT, RUNS_MAX_TURN = 3.0, 15.0
+
+
+def table_runs(settings: Settings, betas: Sequence[float], field_for_beta: Callable,
+               scan, *, u_ref=SEED_U_REF, probe=None, pitch: float = 0.0, roll: float = 0.0,
+               max_tilt: float = RUNS_MAX_TILT, max_turn: float = RUNS_MAX_TURN
+               ) -> TableRuns:
+    """The CFD runs of `build_table` as a `lidarjax.TableRuns`, for
+    `lidarjax.calibrate(..., runs=...)` (the table built again at the estimated
+    installation).
+
+    Every run is read (``field_for_beta(beta)``) cropped to the region that the installation
+    turned by up to `max_turn` and tilted by up to `max_tilt` degrees from its nominal one
+    (`pitch`, `roll`) samples, and **kept in memory** (a `TableRuns` holds them all); a
+    `field_for_beta` that returns one object for several betas (one CFD run seen from
+    rotated platforms) is held once. Arguments as `build_table`. Mesh cases are sampled on
+    their resampling grid here (the exact cellPoint points of `build_table` belong to one
+    installation); build the table to calibrate against as ``runs.table()``."""
+    betas = [float(b) for b in betas]
+    tilted = [settings_mount(settings, betas, pitch=pitch + dp, roll=roll + dr)
+              for dp in (-max_tilt, max_tilt) for dr in (-max_tilt, max_tilt)]
+    turned = [eqx.tree_at(lambda x: x.gamma, m, m.gamma + dg)
+              for m in tilted for dg in (-max_turn, max_turn)]
+    corners = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a), *(tilted + turned))
+    region = scan_bounds(scan, corners, np.asarray(settings.heights()), probe=probe)
+    fields, seen = [], {}
+    for b in betas:
+        f = field_for_beta(b)
+        f = seen.setdefault(id(f), f)
+        if isinstance(f, GridField):
+            f = seen.setdefault(("crop", id(f)), f.crop(*region))
+        fields.append(f)
+    return TableRuns(fields, settings_mount(settings, betas, pitch=pitch, roll=roll), u_ref,
+                     scan, np.asarray(settings.heights()), probe)
 
 
 class _AtValue:

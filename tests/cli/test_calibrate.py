@@ -185,3 +185,41 @@ def test_calibrate_cli_on_the_real_rtd_reports_against_the_header(tmp_path, caps
     out = capsys.readouterr().out
     assert "header tilt: pitch 0.379 deg, roll 0.262 deg" in out
     assert "pitch" in out and "roll" in out
+
+
+def test_calibrate_cli_exact_rebuilds_the_table_from_its_runs(case, capsys):
+    # the instrument turned by 3 deg on its site and tilted by (1, -0.5) deg: records from
+    # the table of the truly turned instrument (`TableRuns.table` of the same runs), and
+    # `calibrate --exact` reads the runs again from the table file's metadata
+    from lidarjax.workflows.seed_tables import table_runs
+
+    settings = lj.io.read_settings(case / "settings.dat")
+    table = lj.io.load_table(case / "plain.npz")
+    runs = table_runs(settings.with_heights(np.asarray(table.heights)), settings.betas,
+                      lambda b: lj.io.load_field(case / "runs" / f"d{b:g}_a0.npz"),
+                      lj.windcube_v2())
+    truth = np.array([3.0, 1.0, -0.5])
+    rng = np.random.default_rng(80)
+    n = 60
+    u, d = rng.uniform(5, 12, n), rng.uniform(0, 360, n)
+    los = u[:, None, None] * np.asarray(runs.table(truth).response_at(d))
+    los = los + 0.02 * rng.standard_normal(los.shape)
+    h = np.asarray(table.heights)
+    times = _write_rtd(case / "exact.rtd", los, h)
+    lines = ["time,height_m,speed_m_s,direction_deg"]
+    for i, t in enumerate(times):
+        lines += [f"{t},{z:g},{u[i]:.4f},{d[i]:.4f}" for z in h]
+    (case / "exact_ref.csv").write_text("\n".join(lines) + "\n")
+    out = case / "exact.json"
+    assert main(["calibrate", "--table", str(case / "plain.npz"), "--records",
+                 str(case / "exact.rtd"), "--reference", str(case / "exact_ref.csv"),
+                 "--exact", "--min-availability", "0", "--out", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["rebuilds"] >= 1 and doc["flags"] == 0, doc["notes"]
+    assert any("iterated on the exact geometry" in x for x in doc["notes"])
+    err = np.abs(np.asarray(doc["offset_deg"]) - truth)
+    assert np.all(err < 3 * np.asarray(doc["std_deg"]) + 1e-4), (doc["offset_deg"], doc["std_deg"])
+    # a table over a profile parameter names no single set of runs
+    assert main(["calibrate", "--table", str(case / "profile.npz"), "--records",
+                 str(case / "exact.rtd"), "--exact", "--min-availability", "0"]) == 2
+    assert "--exact" in capsys.readouterr().err
