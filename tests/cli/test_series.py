@@ -82,10 +82,11 @@ def test_series_through_an_openfoam_sequence_matches_its_probes(tmp_path, capsys
     from lidarjax.cli import main
     from lidarjax.io import Settings, read_table_csv, write_settings
     from lidarjax.io.monitor_points import read_openfoam_probes
+    from tests._transient import LIDAR as lidar
+    from tests._transient import probe_los
 
     case = Path(__file__).resolve().parents[1] / "data" / "openfoam_transient" / "case"
     settings = tmp_path / "settings.dat"
-    lidar = np.array([150.0, 60.0, 0.0])
     write_settings(settings, Settings(zone=2, verbose=1, height=60.0, nh=6, gamma=0.0, beta=0.0,
                                       psi=0.0, epsilon=0.0, betas=np.array([0.0]),
                                       locations=lidar[None]))
@@ -100,17 +101,13 @@ def test_series_through_an_openfoam_sequence_matches_its_probes(tmp_path, capsys
     scan = lidarjax.windcube_v2()
     heights = np.arange(10.0, 60.1, 10.0)
     mp = lidarjax.monitor_points(scan, lidarjax.Mount(lidar), heights)
-    snap = np.arange(10.0, 30.1, 2.0)
-    rows = [int(np.argmin(np.abs(probes.times - t))) for t in snap]
     err = np.zeros(heights.size)
     for i, h in enumerate(heights):
         for b in range(5):
-            j = int(np.flatnonzero((mp.height == h) & (mp.beam == b))[0])
-            d = probes.header_points[j] - lidar
-            ref = probes.values[rows, j] @ (d / np.linalg.norm(d))
             sel = (los["height"] == h) & (los["beam"] == b)
             assert sel.sum() == 4  # whole 5-s cycles in 10..30 s
-            err[i] = np.max(np.abs(los["los"][sel] - np.interp(los["time"][sel], snap, ref)))
+            ref = probe_los(probes, mp, h, b, los["time"][sel])
+            err[i] = np.max(np.abs(los["los"][sel] - ref))
     assert err.max() < 1e-5, err
     wind = read_table_csv(out / "series_wind.csv").columns
     assert np.isfinite(wind["speed"]).any() and np.all(wind["speed"][np.isfinite(wind["speed"])] > 0)

@@ -18,6 +18,7 @@ import lidarjax as lj
 from lidarjax.io import load_field_sequence, sample_openfoam, save_field_npz
 from lidarjax.io.monitor_points import read_openfoam_probes
 from tests._foamwrite import hex_mesh, write_polymesh, write_vector_field
+from tests._transient import probe_los
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "openfoam_transient" / "case"
 
@@ -146,17 +147,11 @@ def _probe_errors(series, probes, mp, heights):
     """Per height: max |LOS - OpenFOAM's probes interpolated between the snapshot times|,
     the probes projected on the beam from the lidar (independent geometry)."""
     los, t_los = np.asarray(series.los), np.asarray(series.los_time)
-    lidar = np.array([150.0, 60.0, 0.0])
-    snap = np.arange(10.0, 30.1, 2.0)
-    rows = [int(np.argmin(np.abs(probes.times - t))) for t in snap]
     err = np.zeros(heights.size)
     for i, h in enumerate(heights):
         for b in range(5):
-            j = int(np.flatnonzero((mp.height == h) & (mp.beam == b))[0])
-            d = probes.header_points[j] - lidar
-            series_j = probes.values[:, j] @ (d / np.linalg.norm(d))
-            err[i] = max(err[i], np.max(np.abs(
-                los[:, i, b] - np.interp(t_los[:, i, b], snap, series_j[rows]))))
+            ref = probe_los(probes, mp, h, b, t_los[:, i, b])
+            err[i] = max(err[i], np.max(np.abs(los[:, i, b] - ref)))
     return err
 
 
@@ -236,15 +231,10 @@ def test_each_snapshot_read_once_and_bad_time_directories_flagged(tmp_path, monk
 
 def _probe_errors_window(series, probes, mp, heights, mask):
     los, t_los = np.asarray(series.los), np.asarray(series.los_time)
-    lidar = np.array([150.0, 60.0, 0.0])
-    snap = np.arange(10.0, 30.1, 2.0)
-    rows = [int(np.argmin(np.abs(probes.times - t))) for t in snap]
     err = 0.0
     for i, h in enumerate(heights):
         for b in range(5):
-            j = int(np.flatnonzero((mp.height == h) & (mp.beam == b))[0])
-            d = probes.header_points[j] - lidar
-            ref = np.interp(t_los[:, i, b], snap, (probes.values[:, j] @ (d / np.linalg.norm(d)))[rows])
+            ref = probe_los(probes, mp, h, b, t_los[:, i, b])
             m = mask[:, i, b]
             err = max(err, float(np.max(np.abs(los[m, i, b] - ref[m]), initial=0.0)))
     return err
