@@ -19,7 +19,9 @@ build it with the recipe in tests/data/openfoam/README.md and pass its folder):
    the first pair compiling `simulate` for each field type, the second pair compared.
 
 Run: ``PYTHONPATH=$PWD python3 benchmarks/exact_paths.py CASE [--snapshots 8]
-[--rotations 36]``. Writes ``benchmarks/results/exact_paths.{json,md}``.
+[--rotations 36] [--part sequence|table]``. Writes ``benchmarks/results/exact_paths.{json,md}``
+(one part rerun: the other's results are kept from the previous file, each part with the
+load average it ran at).
 """
 
 from __future__ import annotations
@@ -84,8 +86,9 @@ def sequence_run(seq: Path, n_used: int) -> dict:
     from lidarjax.io.openfoam import _read_vector_field, openfoam_times, read_openfoam_mesh
     names = openfoam_times(seq)[:n_used]
 
-    def exact_points(grid):  # the series' own node choice: one count, no mount
-        return lj.io.simulate_points(scan, mount, h, lj.probe_for_field(grid, scan, h, probe))
+    from lidarjax.beam import ExactPoints
+
+    exact_points = ExactPoints(scan, mount, h, probe)  # the series' own node choice (mount)
 
     mesh = read_openfoam_mesh(seq)
     region = lj.scan_bounds(scan, mount, h, probe=probe)
@@ -186,9 +189,20 @@ def main() -> int:
     case = Path(args.case).resolve()
     res = {"machine": machine(), "case": os.fspath(case), "lidar": LIDAR, "heights": HEIGHTS,
            "load_before": os.getloadavg()}
+    # one part rerun: the other part's results are kept from the previous file, with the
+    # load average they were measured at
+    prev_file = OUT / "exact_paths.json"
+    prev = json.loads(prev_file.read_text()) if args.part != "all" and prev_file.is_file() else {}
+    for part in ("sequence", "table"):
+        if part != args.part and part in prev:
+            keys = [part] + (["series_marginal_snapshots_per_s"] if part == "sequence" else [])
+            res.update({k: prev[k] for k in keys if k in prev})
+            res[f"{part}_load"] = prev.get(f"{part}_load",
+                                           [prev.get("load_before"), prev.get("load_after")])
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if args.part in ("all", "sequence"):
+            before = os.getloadavg()
             seq = scratch_sequence(case, args.snapshots, tmp)
             runs = []
             for n in (max(2, args.snapshots // 4), args.snapshots):  # memory vs length
@@ -202,13 +216,20 @@ def main() -> int:
             extra = b["series_s"] - a["series_s"]
             res["series_marginal_snapshots_per_s"] = ((b["snapshots"] - a["snapshots"]) / extra
                                                       if extra > 0 else None)
+            res["sequence_load"] = [before, os.getloadavg()]
         if args.part in ("all", "table"):
+            before = os.getloadavg()
             res["table"] = table_run(case, args.rotations, tmp)
+            res["table_load"] = [before, os.getloadavg()]
     res["load_after"] = os.getloadavg()
     OUT.mkdir(exist_ok=True)
     (OUT / "exact_paths.json").write_text(json.dumps(res, indent=1))
     lines = [f"# Exact paths on {case.name}", "", machine_line(res["machine"]),
-             f"load average before/after: {res['load_before']} / {res['load_after']}", ""]
+             f"load average before/after this run ({args.part}): {res['load_before']} / "
+             f"{res['load_after']}", ""]
+    if "sequence_load" in res:
+        lines.append(f"Sequence: load average before/after {res['sequence_load'][0]} / "
+                     f"{res['sequence_load'][1]}")
     for r in res.get("sequence", []):
         lines.append(f"- sequence, {r['snapshots']} snapshots: read U {r['read_s']:.3f} s; first "
                      f"snapshot {r['first_s']:.2f} s; each later {r['later_median_s']:.3f} s "
@@ -223,6 +244,8 @@ def main() -> int:
             "the noise of compilation)"))
     if "table" in res:
         t = res["table"]
+        lines.append(f"Table: load average before/after {res['table_load'][0]} / "
+                     f"{res['table_load'][1]}")
         lines.append(f"- table, {t['rotations']} rotations (second pair; the first, compiling: "
                      f"{t['first_pair_s'][0]:.1f} / {t['first_pair_s'][1]:.1f} s): graded grid "
                      f"{t['grid_s']:.1f} s, exact "

@@ -40,6 +40,7 @@ from .batch import stack_fields as stack_fields
 from .batch import stack_mounts as stack_mounts
 from .batch import unstack_field as unstack_field
 from .batch import unstack_mounts as unstack_mounts
+from .beam import ExactPoints as ExactPoints
 from .beam import GradedProbe as GradedProbe
 from .beam import beam_points as beam_points
 from .beam import probe_for_field as probe_for_field

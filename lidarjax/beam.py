@@ -57,7 +57,7 @@ from .probe import (
 )
 from .scan import Scan
 
-__all__ = ["GradedProbe", "beam_los", "beam_points", "gate_nodes", "gate_quadrature",
+__all__ = ["ExactPoints", "GradedProbe", "beam_los", "beam_points", "gate_nodes", "gate_quadrature",
            "gates_los", "pattern_geometry", "pattern_probe", "probe_for_field",
            "profile_geometry", "scan_points", "shared_gate_rule", "simulate_points"]
 
@@ -222,8 +222,9 @@ def probe_for_field(field: AbstractField, scan: Scan, heights, probe: AbstractPr
       `lidarjax.probe.MAX_NODES` reaches the tolerance.
 
     The one place `simulate`, `simulate_rotations`, `sensitivity`, `uncertainty`, the
-    response tables built from them and the series choose nodes (`beam_points` prepares the
-    same; the series pass no mount: one count, the finest spacing's, at every height). An
+    response tables built from them and the series choose nodes, all with their mount
+    (`beam_points` and `ExactPoints` prepare the same; `simulate_statistics` over an
+    ensemble passes none: one count, the finest spacing's, at every height). An
     explicit node count (``PulsedProbe(n_nodes=17)``, `with_nodes`) wins, and so
     do the point probe, a field that states no length scale (uniform, linear and power-law
     scenes: the probe's default count) and traced inputs. The choice is memoised: the same
@@ -443,6 +444,37 @@ def beam_points(field: AbstractField | None, scan, mount: Mount, heights=None,
     return scan_points(field, scan, mount, probe, shared_nodes=shared_nodes)
 
 
+class ExactPoints:
+    """``field -> points``: every point a profiler path samples from one mount
+    (`simulate_points`), the probe's nodes chosen for the field by `probe_for_field` *with
+    the mount*, exactly as `lidarjax.simulate`, the rotations, `sensitivity`,
+    `lidarjax.simulate_series` and `lidarjax.simulate_statistics` choose them: the
+    ``exact_at`` of `lidarjax.io.load_field` and `lidarjax.io.load_field_sequence` (a mesh
+    loaded with it is exact, the mesh's own cellPoint, at the points those paths sample).
+    The probe chosen is kept as `probe` (None until called), so that a caller can show it.
+
+    The one place the profiler paths (`simulate --field`, `build_table`, `simulate_settings`,
+    `sensitivity_report`, sequences, `lidarjax series`) prepare their points. A plain
+    class, so Dask can ship it.
+
+    **Arguments:** `scan`, `mount` (one, not a batch), `heights` (m above the lidar) and
+    `probe` (None: the point probe) as given to `simulate` / `simulate_series`.
+    """
+
+    def __init__(self, scan, mount: Mount, heights, probe=None):
+        self.scan, self.mount, self.probe_given = scan, mount, probe
+        self.heights = np.asarray(heights, np.float64)
+        self.probe = None
+
+    def __call__(self, field) -> np.ndarray:
+        used = self.probe_given
+        if used is not None:
+            used = probe_for_field(field, self.scan, jnp.asarray(self.heights), used,
+                                   mount=self.mount, caller="exact points")
+        self.probe = used
+        return simulate_points(self.scan, self.mount, self.heights, used)
+
+
 def simulate_points(
     scan: Scan,
     mount: Mount,
@@ -524,15 +556,18 @@ def beam_los(field, origin_local, directions, ranges, probe, los=None):
 
     `los`: optional ``los(points, directions)`` used instead of ``field.los_local`` (a time
     series samples prepared fixed points at many times: its result may carry leading time
-    axes, broadcast against ``points.shape[:-1]``; not with a `GradedProbe`)."""
+    axes, broadcast against ``points.shape[:-1]``). With a `GradedProbe` it is called per
+    group of heights as ``los(points, directions, rows=slice)``, `rows` the group's heights
+    (so that it can pick what it holds per height, e.g. each LOS's time)."""
     if not isinstance(probe, GradedProbe):
         return _beam_los(field, origin_local, directions, ranges, probe, los)
-    if los is not None or ranges.ndim != 2 or ranges.shape[0] != probe.n_heights:
+    if ranges.ndim != 2 or ranges.shape[0] != probe.n_heights:
         raise ValueError(f"beam_los: a GradedProbe holds node counts for {probe.n_heights} "
-                         f"heights, got focus ranges {ranges.shape}"
-                         + (" and a `los` callable" if los is not None else "")
-                         + "; use its `finest` probe there.")
-    parts = [_beam_los(field, origin_local, directions, ranges[rows], p) for rows, p in probe.rows()]
+                         f"heights, got focus ranges {ranges.shape}; use its `finest` probe "
+                         f"there.")
+    parts = [_beam_los(field, origin_local, directions, ranges[rows], p,
+                       None if los is None else functools.partial(los, rows=rows))
+             for rows, p in probe.rows()]
     return (jnp.concatenate([p[0] for p in parts], axis=-2),
             jnp.concatenate([p[1] for p in parts], axis=0))
 

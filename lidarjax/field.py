@@ -319,6 +319,41 @@ class IndexedPoints:
         return self.index.tolerance
 
 
+def axes_resolution(local_axes, stated: float | None = None) -> float | None:
+    """A grid's resolution (m) from its axes (`GridField.resolution`): `stated` if given, else
+    the smallest node spacing (``None`` when traced)."""
+    if stated is not None:
+        return stated
+    if not is_concrete(*local_axes):
+        return None
+    steps = [np.diff(np.asarray(a, np.float64)) for a in local_axes]
+    steps = np.concatenate([d[d > 0] for d in steps])
+    return float(steps.min()) if steps.size else None
+
+
+def axes_spacing_at(local_axes, origin, origin_lo, stated: float | None, points):
+    """A grid's spacing at absolute CFD `points` (m, host) from its axes relative to
+    ``origin + origin_lo`` (`GridField.spacing_at`): the smallest edge of the cell holding
+    each point (at least `stated`), NaN outside; ``None`` when traced or uniform."""
+    if not is_concrete(origin, origin_lo, *local_axes):
+        return None
+    nodes = [np.asarray(a, np.float64) for a in local_axes]
+    steps = [np.diff(a) for a in nodes]
+    if all(np.ptp(d) <= 1e-9 * np.max(np.abs(d)) for d in steps):
+        return None
+    p = (np.asarray(points, np.float64).reshape(-1, 3)
+         - np.asarray(origin, np.float64) - np.asarray(origin_lo, np.float64))
+    out = np.full(p.shape[0], np.inf)
+    inside = np.all(np.isfinite(p), axis=-1)
+    for a, (nd, d) in enumerate(zip(nodes, steps, strict=True)):
+        i = np.clip(np.searchsorted(nd, p[:, a], side="right") - 1, 0, nd.size - 2)
+        out = np.minimum(out, d[i])
+        inside &= (p[:, a] >= nd[0]) & (p[:, a] <= nd[-1])
+    if stated is not None:
+        out = np.maximum(out, stated)
+    return np.where(inside, out, np.nan)
+
+
 def _index_scale(xp, local_axes, dtype):
     """Nodes per metre along each axis, ``(n - 1) / extent`` (0 for a single node), in
     `dtype`, from the axes relative to their first node: `xp` is numpy for host axes,
@@ -400,37 +435,15 @@ class GridField(AbstractField):
     def resolution(self) -> float | None:
         """The field's smallest length scale (m): the `resolution` it was built with, else the
         grid's smallest node spacing (``None`` when traced)."""
-        if self.stated_resolution is not None:
-            return self.stated_resolution
-        if not is_concrete(self.x_local, self.y_local, self.z_local):
-            return None
-        steps = [np.diff(np.asarray(a, np.float64)) for a in (self.x_local, self.y_local, self.z_local)]
-        steps = np.concatenate([d[d > 0] for d in steps])
-        return float(steps.min()) if steps.size else None
+        return axes_resolution((self.x_local, self.y_local, self.z_local), self.stated_resolution)
 
     def spacing_at(self, points: Float[ArrayLike, "n 3"]) -> np.ndarray | None:
         """The grid's spacing at `points` (absolute CFD metres, host) ``(n,)``: the smallest
         edge of the cell holding each point (the stated `resolution` where it is coarser),
         NaN outside the grid; ``None`` when the axes are traced, and when the grid is uniform
         (its `resolution` everywhere). A mesh graded to a wall is fine only near it."""
-        axes = (self.x_local, self.y_local, self.z_local)
-        if not is_concrete(self.origin, self.origin_lo, *axes):
-            return None
-        nodes = [np.asarray(a, np.float64) for a in axes]
-        steps = [np.diff(a) for a in nodes]
-        if all(np.ptp(d) <= 1e-9 * np.max(np.abs(d)) for d in steps):
-            return None
-        p = (np.asarray(points, np.float64).reshape(-1, 3)
-             - np.asarray(self.origin, np.float64) - np.asarray(self.origin_lo, np.float64))
-        out = np.full(p.shape[0], np.inf)
-        inside = np.all(np.isfinite(p), axis=-1)
-        for a, (nd, d) in enumerate(zip(nodes, steps, strict=True)):
-            i = np.clip(np.searchsorted(nd, p[:, a], side="right") - 1, 0, nd.size - 2)
-            out = np.minimum(out, d[i])
-            inside &= (p[:, a] >= nd[0]) & (p[:, a] <= nd[-1])
-        if self.stated_resolution is not None:
-            out = np.maximum(out, self.stated_resolution)
-        return np.where(inside, out, np.nan)
+        return axes_spacing_at((self.x_local, self.y_local, self.z_local), self.origin,
+                               self.origin_lo, self.stated_resolution, points)
 
     def __init__(self, x, y, z, velocity, *, uniform=None, resolution=None):
         if resolution is not None:

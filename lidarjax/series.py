@@ -214,10 +214,15 @@ def simulate_series(
     - `point_dt`: sampling interval of the point sensors, s (1 Hz by default; a sonic logs
       at 10-20 Hz: 0.05).
     - `refine_probe`: a probe built without an explicit `n_nodes` integrates its weighting
-      with the nodes the field's resolution needs (`lidarjax.probe_for_field`, the same
-      choice as `simulate`: for a turbulence box, its spacing; a pulsed probe needs 17 nodes
-      for a 4 m box, where 9 alias waves shorter than about 30 m); the weighting is
+      with the nodes the field's resolution needs (`lidarjax.probe_for_field` with the
+      mount, the same choice as `simulate`: for a turbulence box, its spacing; a pulsed
+      probe needs 17 nodes for a 4 m box, where 9 alias waves shorter than about 30 m; on a
+      graded grid, per height from the spacing along a fixed lidar's beams; with a
+      `motion`, one count at every height, the finest spacing's); the weighting is
       unchanged, and an explicit count wins. ``False`` keeps the probe's nodes as given.
+      A mesh sequence prepared for this run samples the same points:
+      ``load_field_sequence(case, exact_at=lidarjax.ExactPoints(scan, mount, heights,
+      probe))``.
     - `chunk`: with a `FieldSequence`, the most LOS cycles (rows of `Series.los`) one
       compiled call simulates; default: as many as one window of snapshots spans.
 
@@ -255,7 +260,10 @@ def simulate_series(
                          f" SampledMotion), got {type(motion).__name__}.")
     schedule.check(scan)
     if refine_probe:
-        probe = probe_for_field(field, scan, heights, probe, caller="simulate_series")
+        # with the mount, as `simulate` (and `lidarjax.ExactPoints`, which prepares a
+        # mesh's points for this run) choose them: per height on a graded grid
+        probe = probe_for_field(field, scan, heights, probe, mount=_fixed(mount, motion),
+                                caller="simulate_series")
     heights = jnp.atleast_1d(jnp.asarray(heights, dtype=field.dtype))
     start, duration, n_cycles = _check_span(times, schedule, heights.shape[0])
     if not point_dt > 0:
@@ -270,6 +278,13 @@ def simulate_series(
                        probe, motion, jnp.asarray(point_dt, field.dtype),
                        n_cycles=n_cycles, n_points=n_points, order=order,
                        duration=float(duration))
+
+
+def _fixed(mount: Mount, motion) -> Mount | None:
+    """The mount the probe's nodes are chosen for (`probe_for_field`): a fixed lidar's, per
+    height along its beams as `simulate` chooses them; None for a moving lidar (its beams
+    move: one count, the field's finest spacing's, at every height)."""
+    return mount if motion is None else None
 
 
 def _los_times(schedule: Schedule, start, n_cycles: int, n_heights: int, dtype):
@@ -339,8 +354,9 @@ def _series_los(field, scan, mount_d, origin_local, heights, t_los, probe, motio
     # per point, a steady field samples them once) and sampled at every LOS time.
     n_times = m * repeat
 
-    def los_at(pts, dirs):
-        t = t_los[..., None] if pts.ndim == 4 else t_los  # (m, h, b[, 1])
+    def los_at(pts, dirs, rows=slice(None)):  # rows: the heights of a GradedProbe's group
+        t = t_los[:, rows]
+        t = t[..., None] if pts.ndim == 4 else t  # (m, h, b[, 1])
         return field.time_sampler(pts, dirs, n_times=n_times)(t)
 
     return beam_los(field, origin_local, n_cfd, ranges, probe, los=los_at)[0]
@@ -771,7 +787,9 @@ def simulate_statistics(
     probe_field = jax.tree_util.tree_map(lambda a: a[0], field) if ensemble else field
     _validate(probe_field, scan, mount, np.asarray(heights), None, probe)
     if refine_probe:
-        probe = probe_for_field(field, scan, heights, probe, caller="simulate_statistics")
+        probe = probe_for_field(field, scan, heights, probe,
+                                mount=None if ensemble else _fixed(mount, motion),
+                                caller="simulate_statistics")
     dtype = probe_field.dtype
     heights = jnp.atleast_1d(jnp.asarray(heights, dtype=dtype))
     _, duration, n_cycles = _check_span((0.0, record_length), schedule, heights.shape[0])

@@ -31,16 +31,17 @@ import numpy as np
 
 from .. import scan as scans
 from ..angles import wind_direction
+from ..beam import ExactPoints
 from ..footprint import scan_bounds
-from ..io import read_motion_csv, read_settings, simulate_points, write_scan_netcdf, write_table_csv
+from ..io import load_field_sequence, read_motion_csv, read_settings, write_scan_netcdf, write_table_csv
 from ..io.fields import load_field
 from ..mount import Mount
 from ..probe import PointProbe
 from ..scanning import ScanResult, scan_points, simulate_scan_series, vad_fit
 from ..scenes import uniform
-from ..series import RECORD_LENGTH, probe_for_field, simulate_statistics
+from ..series import RECORD_LENGTH, probe_for_field, simulate_series, simulate_statistics
 from ..timing import schedule_for
-from ..workflows.series_report import write_series_report
+from ..workflows.series_report import write_series_csv, write_series_report
 from ..workflows.series_run import mean_wind_above, series_field
 from ._common import (
     add_probe_arguments,
@@ -108,11 +109,21 @@ def register(sub) -> None:
     p.add_argument("settings", help="the seed's settings.dat (location, angles, heights)")
     p.add_argument("--beta", type=finite_float, default=None,
                    help="platform rotation row to use (default: the file's beta)")
-    p.add_argument("--field", required=True,
+    p.add_argument("--field", default=None,
                    help="mean flow: a CFD field file (.npz, .nc, Fluent ASCII), an OpenFOAM case "
                         "or VTK mesh (its own cellPoint at the points a fixed lidar samples), or "
                         "'uniform' (uniform wind of --speed from --direction)")
-    box = p.add_mutually_exclusive_group(required=True)
+    p.add_argument("--sequence", default=None, metavar="CASE",
+                   help="instead of --field and a box: an OpenFOAM case of an unsteady run (LES, "
+                        "URANS); the profiler flies through its time directories, each LOS at its "
+                        "own time (linear between snapshots; a fixed lidar exact, the mesh's own "
+                        "cellPoint, at every point it samples). Writes series_los.csv and "
+                        "series_wind.csv")
+    p.add_argument("--time-range", default=None, metavar="FIRST,LAST",
+                   help="--sequence: the snapshots between these times (s) only (default all)")
+    p.add_argument("--max-snapshots", type=positive_int, default=8,
+                   help="--sequence: the most snapshots held in memory at once (default 8)")
+    box = p.add_mutually_exclusive_group()
     box.add_argument("--box", help="turbulence box: a TurbSim .bts file, or three HAWC2 "
                                    "binary files 'u.bin,v.bin,w.bin' (with --box-shape)")
     box.add_argument("--generate-box", type=_ints, metavar="NX,NY,NZ",
@@ -181,32 +192,35 @@ def run(args) -> int:
         start = np.datetime64(args.start, "s")
     except ValueError:
         raise ValueError(f"--start {args.start!r} is not a date and time (e.g. 2024-01-01T00:00)") from None
+    if args.sequence is not None:
+        if scanning:
+            raise ValueError(f"--sequence flies a profiler; {args.scan} is a scanning scan "
+                             "(use --field and a box)")
+        given = [o for o, v in (("--field", args.field), ("--box", args.box),
+                                ("--generate-box", args.generate_box)) if v is not None]
+        if given:
+            raise ValueError(f"--sequence is the whole flow (its snapshots are the turbulence); "
+                             f"drop {', '.join(given)}")
+    else:
+        if args.field is None:
+            raise ValueError("give --field (a mean flow, with --box or --generate-box) or "
+                             "--sequence CASE (an unsteady run's snapshots)")
+        if args.box is None and args.generate_box is None:
+            raise ValueError("--field needs a turbulence box: --box or --generate-box")
     if scanning:
         return run_scanning(args, settings, beta, location, heights, start)
+    if args.sequence is not None:
+        return run_sequence(args, settings, beta, location, heights, start)
     n_rec = int(np.floor(args.hours * 3600.0 / RECORD_LENGTH + 1e-9))
     if n_rec < 1:
         raise ValueError(f"--hours {args.hours} holds no whole 10-minute record")
     if args.ti <= 0:
         raise ValueError(f"--ti must be positive, got {args.ti}")
-    scan = make_scan(args.scan, args.cone_angle)
-    if args.tilt_compensation:
-        make = getattr(scans, args.scan)
-        scan = (make(tilt_compensation=True) if args.cone_angle is None
-                else make(args.cone_angle, tilt_compensation=True))
-    if args.probe == "auto":
-        args.probe = "cw" if args.scan == "zephir" else "pulsed"
-    probe = make_probe(args)
-    schedule = schedule_for(scan, seconds_per_los=args.seconds_per_los)
-    mount = Mount(location, beta=beta, gamma=settings.gamma, psi=settings.psi,
-                  epsilon=settings.epsilon)
-    motion = None
-    if args.motion:
-        motion = read_motion_csv(args.motion)
+    scan, probe, schedule, mount, motion = _profiler(args, settings, beta, location)
     auto_nodes = args.probe_nodes is None and probe is not None
 
-    def points(f):  # what simulate_statistics samples (simulate's geometry and node choice)
-        used = probe_for_field(f, scan, heights, probe, caller="lidarjax series") if auto_nodes else probe
-        return simulate_points(scan, mount, heights, used)
+    # what simulate_statistics samples: simulate's geometry and node choice, with the mount
+    points = ExactPoints(scan, mount, heights, probe)
 
     # a moving lidar samples other points at every time: the graded grid of a mesh then, and
     # the whole mean flow (its excursions are not bounded here)
@@ -217,7 +231,7 @@ def run(args) -> int:
     starts = np.arange(n_rec) * RECORD_LENGTH
     if auto_nodes:  # explicit --probe-nodes kept as given
         # the nodes that resolve the box, chosen here once so that they can be shown
-        probe = probe_for_field(field, scan, heights, probe, caller="lidarjax series")
+        probe = probe_for_field(field, scan, heights, probe, mount=mount, caller="lidarjax series")
     label = f"{type(probe).__name__}, {probe.n_nodes} nodes" if probe else "point probe"
     print(f"lidarjax series: {args.scan} ({label}), {heights.size} heights, {n_rec} records; "
           f"{info}")
@@ -238,6 +252,77 @@ def run(args) -> int:
     wrote = [str(res["sta"]), str(res["csv"])] + ([str(res["plot"])] if res["plot"] else [])
     print("wrote " + ", ".join(wrote) + (f" ({res['note']})" if res["note"] else ""))
     return 0
+
+
+def _profiler(args, settings, beta, location):
+    """The profiler of the arguments: ``(scan, probe, schedule, mount, motion)``."""
+    scan = make_scan(args.scan, args.cone_angle)
+    if args.tilt_compensation:
+        make = getattr(scans, args.scan)
+        scan = (make(tilt_compensation=True) if args.cone_angle is None
+                else make(args.cone_angle, tilt_compensation=True))
+    if args.probe == "auto":
+        args.probe = "cw" if args.scan == "zephir" else "pulsed"
+    probe = make_probe(args)
+    schedule = schedule_for(scan, seconds_per_los=args.seconds_per_los)
+    mount = Mount(location, beta=beta, gamma=settings.gamma, psi=settings.psi,
+                  epsilon=settings.epsilon)
+    motion = read_motion_csv(args.motion) if args.motion else None
+    return scan, probe, schedule, mount, motion
+
+
+def run_sequence(args, settings, beta, location, heights, start) -> int:
+    """A profiler flown through an unsteady OpenFOAM run's snapshots (`--sequence`):
+    `lidarjax.io.load_field_sequence` made exact at the points a fixed lidar samples
+    (`lidarjax.ExactPoints`, the nodes `simulate_series` chooses; no graded grid per
+    snapshot), `lidarjax.simulate_series` over every whole scan cycle within the snapshots'
+    span, `lidarjax.workflows.series_report.write_series_csv`. A moving lidar samples the
+    graded grid of each snapshot instead."""
+    scan, probe, schedule, mount, motion = _profiler(args, settings, beta, location)
+    time_range = None
+    if args.time_range is not None:
+        try:
+            time_range = tuple(float(v) for v in args.time_range.split(","))
+        except ValueError:
+            time_range = ()
+        if len(time_range) != 2 or not all(np.isfinite(time_range)) or time_range[1] <= time_range[0]:
+            raise ValueError(f"--time-range {args.time_range!r}: expected two increasing times "
+                             f"'FIRST,LAST' in seconds")
+    inputs = [("settings", args.settings), ("--sequence", args.sequence), ("--motion", args.motion)]
+    out = check_output_folder(args.out, files=("series_los.csv", "series_wind.csv"), inputs=inputs)
+    fixed = motion is None
+    points = ExactPoints(scan, mount, heights, probe) if fixed else None
+    region = scan_bounds(scan, mount, heights, probe=probe) if fixed else None
+    seq = load_field_sequence(args.sequence, region=region, time_range=time_range,
+                              max_snapshots=args.max_snapshots, exact_at=points,
+                              grid_fallback=not fixed)
+    t0, t1 = (float(t) for t in seq.time_span)
+    series = simulate_series(seq, scan, mount, heights, (t0, t1 - t0), schedule=schedule,
+                             probe=probe, motion=motion)
+    used = probe if points is None else points.probe
+    label = (f"{type(used).__name__}, nodes per height {_node_counts(used, heights.size)}"
+             if used is not None and not isinstance(used, PointProbe) else "point probe")
+    los = np.asarray(series.los)
+    print(f"lidarjax series: {args.scan} ({label}) through {len(seq)} snapshots of "
+          f"{args.sequence}, {t0:g}..{t1:g} s: {los.shape[0]} cycles, "
+          f"{int(np.isfinite(los).sum())}/{los.size} LOS finite"
+          + ("; exact cellPoint at every point sampled" if fixed else
+             "; a moving lidar: the graded grid of each snapshot"))
+    meta = {"settings": str(args.settings), "sequence": str(args.sequence), "scan": args.scan,
+            "beta_deg": beta, "start": str(start), "snapshots": len(seq)}
+    res = write_series_csv(out, series, metadata=meta)
+    speed = np.asarray(series.speed)
+    print(f"{'height':>7s} {'U_lidar':>8s} {'U_point':>8s}")
+    point = np.hypot(*np.moveaxis(np.asarray(series.point_velocity)[..., :2], -1, 0))
+    for k, h in enumerate(heights):
+        print(f"{h:7.1f} {np.nanmean(speed[:, k]):8.3f} {np.nanmean(point[:, k]):8.3f}")
+    print(f"wrote {res['los']}, {res['wind']}")
+    return 0
+
+
+def _node_counts(probe, n_heights: int) -> tuple[int, ...]:
+    counts = getattr(probe, "node_counts", None)
+    return tuple(counts) if counts is not None else (probe.n_nodes,) * n_heights
 
 
 def build_field(args, settings, beta, location, heights, exact_points=None, region=None):

@@ -34,6 +34,7 @@ without it.
 from .._deprecated import deprecated_getattr
 from ._exact import CellPointField as CellPointField
 from ._exact import CellPointSnapshots as CellPointSnapshots
+from ._exact import CellPointTets as CellPointTets
 from ._exact import cellpoint_field as cellpoint_field
 from ._exact import simulate_points as simulate_points
 from .fields import FieldArrays as FieldArrays

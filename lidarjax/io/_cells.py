@@ -420,30 +420,51 @@ class CellPointSampler:
         return done if locations else (out, tests)
 
 
-def boundary_face_values(
-    mesh: PolyMesh, faces: np.ndarray, face_area: np.ndarray, owner_value: np.ndarray,
-    boundary: BoundaryValues,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Values `(n, 3)` of boundary `faces` and whether each is on a proper patch (not empty,
-    not coupled): those carry the boundary point values in `volPointInterpolation`."""
-    vals = np.zeros((faces.size, 3))
-    proper = np.zeros(faces.size, bool)
-    for name, ptype, start, n in mesh.patches:
-        sel = (faces >= start) & (faces < start + n)
-        if not sel.any() or ptype in _NOT_PROPER:
-            continue
-        proper[sel] = True
-        spec = boundary.values.get(name, "cell")
-        if isinstance(spec, str):
-            v = owner_value[sel]
-            if spec == "slip":
-                nrm = face_area[sel] / np.maximum(np.linalg.norm(face_area[sel], axis=1), 1e-300)[:, None]
-                v = v - np.einsum("ij,ij->i", v, nrm)[:, None] * nrm
-            vals[sel] = v
-        else:
-            arr = np.asarray(spec, np.float64)
-            vals[sel] = arr if arr.ndim == 1 else arr[faces[sel] - start]
-    return vals, proper
+@dataclasses.dataclass(frozen=True, eq=False)
+class FaceValues:
+    """Values `(n, 3)` of fixed boundary `faces` from any field on the mesh: the faces are
+    grouped by patch once (`FaceValues.build`), so that each field costs one pass per patch
+    the faces touch. `proper[i]`: face `i` is on a proper patch (not empty, not coupled):
+    those carry the boundary point values in `volPointInterpolation`."""
+
+    faces: np.ndarray
+    area: np.ndarray  # (n, 3) the faces' area vectors, m^2
+    owner: np.ndarray  # the faces' owner cells (global numbers)
+    proper: np.ndarray
+    # per proper patch the faces touch: (name, positions in `faces`, face numbers within
+    # the patch, unit face normals)
+    groups: tuple[tuple[str, np.ndarray, np.ndarray, np.ndarray], ...]
+
+    @classmethod
+    def build(cls, mesh: PolyMesh, faces: np.ndarray, face_area: np.ndarray) -> FaceValues:
+        faces = np.asarray(faces, np.int64)
+        face_area = np.asarray(face_area, np.float64).reshape(-1, 3)
+        proper = np.zeros(faces.size, bool)
+        groups = []
+        for name, ptype, start, n in mesh.patches:
+            sel = np.flatnonzero((faces >= start) & (faces < start + n))
+            if not sel.size or ptype in _NOT_PROPER:
+                continue
+            proper[sel] = True
+            nrm = face_area[sel] / np.maximum(np.linalg.norm(face_area[sel], axis=1), 1e-300)[:, None]
+            groups.append((name, sel, faces[sel] - start, nrm))
+        return cls(faces=faces, area=face_area, owner=mesh.owner[faces], proper=proper,
+                   groups=tuple(groups))
+
+    def __call__(self, cell_value: np.ndarray, boundary: BoundaryValues) -> np.ndarray:
+        """The faces' values (m/s) from `cell_value (n_cells, 3)` and the patch values."""
+        vals = np.zeros((self.faces.size, 3))
+        for name, sel, local, nrm in self.groups:
+            spec = boundary.values.get(name, "cell")
+            if isinstance(spec, str):
+                v = cell_value[self.owner[sel]]
+                if spec == "slip":
+                    v = v - np.einsum("ij,ij->i", v, nrm)[:, None] * nrm
+                vals[sel] = v
+            else:
+                arr = np.asarray(spec, np.float64)
+                vals[sel] = arr if arr.ndim == 1 else arr[local]
+        return vals
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -461,8 +482,7 @@ class PointValues:
     pair_point: np.ndarray
     pair_cell: np.ndarray
     pair_weight: np.ndarray
-    bfaces: np.ndarray
-    bface_area: np.ndarray
+    faces: FaceValues  # the boundary faces around the region's points
     patch_point: np.ndarray
     patch_face: np.ndarray
     patch_weight: np.ndarray
@@ -477,8 +497,7 @@ class PointValues:
         for a in range(3):
             vsum[:, a] += np.bincount(self.pair_point, weights=self.pair_weight * cv[self.pair_cell, a],
                                       minlength=n)
-        bvals, _ = boundary_face_values(self.mesh, self.bfaces, self.bface_area,
-                                        cell_value[self.mesh.owner[self.bfaces]], boundary)
+        bvals = self.faces(cell_value, boundary)
         for a in range(3):
             vsum[:, a] += np.bincount(self.patch_point, weights=self.patch_weight * bvals[self.patch_face, a],
                                       minlength=n)
@@ -488,10 +507,11 @@ class PointValues:
 
     def vertex_values(self, sampler: CellPointSampler, tets: np.ndarray) -> VertexValues:
         """The recipe that gives the vertex values `(n, 4, 3)` of the tetrahedra `tets` (of
-        `sampler`, built with this recipe; -1: in no cell) from any field on the mesh, as
-        two sparse matrices: one over the mesh's cell values, one over the boundary face
-        values those vertices use. Built once per mesh and point set; a snapshot then costs
-        a sparse matrix product (`VertexValues.__call__`)."""
+        `sampler`, built with this recipe; -1: in no cell) from any field on the mesh: each
+        distinct vertex (a cell centre, a mesh point) once, as two sparse matrices, one over
+        the cell values those vertices use, one over the boundary face values they use, then
+        gathered into the `(n, 4)` rows. Built once per mesh and point set; a snapshot then
+        costs a sparse matrix product over a few hundred vertices (`VertexValues.__call__`)."""
         tets = np.asarray(tets, np.int64).reshape(-1)
         n = tets.size
         nc = self.mesh.n_cells
@@ -503,47 +523,54 @@ class PointValues:
              (self.pair_point, self.ring_cells[self.pair_cell])), shape=(npts, nc))
         p_face = sparse.csr_matrix(
             (self.patch_weight * inv[self.patch_point], (self.patch_point, self.patch_face)),
-            shape=(npts, self.bfaces.size))
+            shape=(npts, self.faces.faces.size))
         found = tets >= 0
         t = np.where(found, tets, 0)
         cells = self.ring_cells[self.sub_cells[sampler.tet_cell[t]]]  # global cell numbers
         pts = sampler.tet_pts[t]  # (n, 3) sampler point numbers
         found &= (self.wsum[pts] > 0).all(axis=1)
-        rows = np.arange(4 * n).reshape(n, 4)
-        ok = np.flatnonzero(found)
-        select = sparse.csr_matrix(
-            (np.ones(3 * ok.size), (rows[ok, 1:].reshape(-1), pts[ok].reshape(-1))),
-            shape=(4 * n, npts))
-        centre = sparse.csr_matrix((np.ones(ok.size), (rows[ok, 0], cells[ok])), shape=(4 * n, nc))
-        cell_m = (centre + select @ p_cell).tocsr()
-        face_m = (select @ p_face).tocsc()
+        # the distinct vertices: the cell centres, then the mesh points
+        ucell, icell = np.unique(cells[found], return_inverse=True)
+        upt, ipt = np.unique(pts[found].reshape(-1), return_inverse=True)
+        rows = np.zeros((n, 4), np.int64)
+        rows[found, 0] = icell.reshape(-1)
+        rows[found, 1:] = ucell.size + ipt.reshape(-1, 3)
+        centre = sparse.csr_matrix((np.ones(ucell.size), (np.arange(ucell.size), ucell)),
+                                   shape=(ucell.size, nc))
+        cell_m = sparse.vstack([centre, p_cell[upt]]).tocsc()
+        face_m = sparse.vstack([sparse.csr_matrix((ucell.size, p_face.shape[1])),
+                                p_face[upt]]).tocsc()
+        cols = np.flatnonzero(np.diff(cell_m.indptr) > 0)
         used = np.flatnonzero(np.diff(face_m.indptr) > 0)
-        return VertexValues(mesh=self.mesh, cell=cell_m, face=face_m[:, used].tocsr(),
-                            faces=self.bfaces[used], face_area=self.bface_area[used], found=found)
+        return VertexValues(cells=cols, cell=cell_m[:, cols].tocsr(), face=face_m[:, used].tocsr(),
+                            faces=FaceValues.build(self.mesh, self.faces.faces[used],
+                                                   self.faces.area[used]),
+                            rows=rows.reshape(-1), found=found)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class VertexValues:
     """Vertex values `(n, 4, 3)` (cell centre, base, A, B) of located tetrahedra from a
-    field on the mesh (`PointValues.vertex_values`): ``cell @ cell_value + face @
-    face_values``, the face values of `faces` (boundary faces, with their area vectors
-    `face_area`) by `boundary_face_values`; NaN rows where `found` is False."""
+    field on the mesh (`PointValues.vertex_values`): the distinct vertices' values ``cell @
+    cell_value[cells] + face @ faces(...)`` (the boundary face values by `FaceValues`),
+    gathered by `rows (4 n,)`; NaN rows where `found` is False."""
 
-    mesh: PolyMesh
+    cells: np.ndarray
     cell: sparse.csr_matrix
     face: sparse.csr_matrix
-    faces: np.ndarray
-    face_area: np.ndarray
+    faces: FaceValues
+    rows: np.ndarray
     found: np.ndarray
 
     def __call__(self, cell_value: np.ndarray, boundary: BoundaryValues) -> np.ndarray:
         cell_value = np.asarray(cell_value, np.float64)
-        out = self.cell @ cell_value
-        if self.faces.size:
-            bvals, _ = boundary_face_values(self.mesh, self.faces, self.face_area,
-                                            cell_value[self.mesh.owner[self.faces]], boundary)
-            out += self.face @ bvals
-        out = out.reshape(-1, 4, 3)
+        n = self.found.size
+        if self.cell.shape[0] == 0:  # no point in a cell
+            return np.full((n, 4, 3), np.nan)
+        vertex = self.cell @ cell_value.take(self.cells, axis=0)
+        if self.faces.faces.size:
+            vertex += self.face @ self.faces(cell_value, boundary)
+        out = vertex.take(self.rows, axis=0).reshape(n, 4, 3)
         out[~self.found] = np.nan
         return out
 
@@ -615,8 +642,8 @@ def build_sampler_and_values(
     # boundary faces among those touching the region points
     bsel = ~ti_mask
     bfaces = tfaces[bsel]
-    _, bproper = boundary_face_values(
-        mesh, bfaces, farea[face_pos[bfaces]], cell_value[mesh.owner[bfaces]], boundary)
+    bvalues = FaceValues.build(mesh, bfaces, farea[face_pos[bfaces]])
+    bproper = bvalues.proper
     b_ctr = fctr[face_pos[bfaces]]
     bflat, boffs, _ = _gather_face_points(mesh, bfaces)
     bsizes = np.diff(boffs)
@@ -687,8 +714,8 @@ def build_sampler_and_values(
             np.minimum.at(clo, tet_cell, pxyz[tet_pts[:, k]])
             np.maximum.at(chi, tet_cell, pxyz[tet_pts[:, k]])
     values = PointValues(mesh=mesh, ring_cells=ring_cells, sub_cells=sub_cells, pair_point=pp[sel],
-                         pair_cell=pc[sel], pair_weight=w_int, bfaces=bfaces,
-                         bface_area=farea[face_pos[bfaces]], patch_point=bpp, patch_face=bff,
+                         pair_cell=pc[sel], pair_weight=w_int, faces=bvalues,
+                         patch_point=bpp, patch_face=bff,
                          patch_weight=w_b, wsum=wsum)
     cell_v, point_v = values(cell_value, boundary)
     sampler = CellPointSampler(

@@ -742,9 +742,9 @@ def load_field(
 
     - `exact_at`: meshes (OpenFOAM cases, VTK files) only: the points `simulate` will
       sample, `(n, 3)` absolute CFD metres, or a function of the resampled `GridField`
-      returning them (the probe's nodes depend on the grid's resolution:
-      ``lambda g: lidarjax.io.simulate_points(scan, mount, heights,
-      lidarjax.probe_for_field(g, scan, heights, probe))``). The field returned is then
+      returning them (the probe's nodes depend on the grid's spacing along the beams:
+      ``lidarjax.ExactPoints(scan, mount, heights, probe)``, `simulate`'s own choice).
+      The field returned is then
       a `lidarjax.io.CellPointField`: the mesh's own cellPoint interpolation (what OpenFOAM's
       `probes` report) at those points, the graded grid anywhere else. Gridded files and
       Fluent exports are returned as their `GridField` (their grid is their own data).

@@ -32,7 +32,7 @@ import numpy as np
 from .._util import PathLike, import_optional
 from ..field import FieldSequence, GridField, SnapshotField
 from ._cells import build_sampler_and_values
-from ._exact import CellPointField, CellPointSnapshots
+from ._exact import CellPointSnapshots, CellPointTets
 from .fields import FieldArrays, FieldLoadReport, _crop_arrays, _region_box, load_field
 from .openfoam import (
     OpenFOAMField,
@@ -102,9 +102,18 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
     mesh = merged[3] if decomposed else read_openfoam_mesh(p)
     prepared: dict[str, Any] = {}  # the geometry, built once from the first good snapshot
 
-    def read(k: int) -> OpenFOAMField:
+    def finite(values: np.ndarray, where: Path) -> None:
+        """A one-line ValueError naming the file if any cell value is not finite."""
+        if not np.isfinite(np.add.reduce(values, axis=None)):  # one pass; NaN/inf propagate
+            bad = ~np.isfinite(values).all(axis=1)
+            if bad.any():
+                raise ValueError(f"{os.fspath(where / field)}: {int(bad.sum())} cell values are "
+                                 f"not finite (first: cell {int(np.argmax(bad))})")
+
+    def read(k: int, whole: bool = True) -> OpenFOAMField:
         """Snapshot `k`'s velocity, read once; a one-line ValueError naming its time
-        directory for a changed mesh, an unreadable file or non-finite values."""
+        directory for a changed mesh, an unreadable file or (`whole`: anywhere in the mesh)
+        non-finite values."""
         where = p / names[k]
         moved = _mesh_changes(p, names[k], decomposed)
         if moved is not None:
@@ -119,11 +128,8 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
         except (OSError, ValueError, EOFError) as err:
             text = str(err).splitlines()[0] if str(err) else type(err).__name__
             raise ValueError(text if os.fspath(where) in text else f"{os.fspath(where)}: {text}") from None
-        if not np.isfinite(np.add.reduce(values, axis=None)):  # one pass; NaN/inf propagate
-            bad = ~np.isfinite(values).all(axis=1)
-            if bad.any():
-                raise ValueError(f"{os.fspath(where / field)}: {int(bad.sum())} cell values are "
-                                 f"not finite (first: cell {int(np.argmax(bad))})")
+        if whole:
+            finite(values, where)
         return OpenFOAMField(case=p, time=names[k], field=field, mesh=mesh, cell_values=values,
                              boundary=boundary)
 
@@ -148,24 +154,41 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
         prepared.update(axes=axes, sampler=sampler, refill=refill)
         if grid_fallback:
             prepared["located"] = sampler.grid_locations(axes)
-        else:  # no grid per snapshot: two NaN nodes per axis, the graded grid's resolution
-            prepared.update(axes=[np.array([a[0], a[-1]]) for a in axes],
-                            resolution=GridField(*axes, velocity).resolution)
+        else:  # no grid per snapshot: two NaN nodes per axis; the graded grid's axes kept
+            prepared.update(axes=[np.array([a[0], a[-1]]) for a in axes])  # for its spacing
         if points is not None:
             tets, _ = sampler.locate(points)
             found = tets >= 0
             vertices = np.full((points.shape[0], 4, 3), np.nan)
             if found.any():
                 vertices[found] = sampler.tet_vertices(tets[found])[0]
-            mix = refill.vertex_values(sampler, tets)
-            grid = GridField(*axes, velocity if dtype is None else velocity.astype(dtype))
-            prepared.update(mix=mix, geometry=CellPointField(
-                grid, points, vertices, mix(of.cell_values, of.boundary)))
+            prepared.update(mix=refill.vertex_values(sampler, tets),
+                            tets=CellPointTets(first, points, vertices, caller=name))
+            if not grid_fallback:
+                prepared["graded"] = (first.x_local, first.y_local, first.z_local)
         return velocity
 
+    def exact_values(k: int, of: OpenFOAMField) -> np.ndarray:
+        """The prepared points' vertex values from snapshot `k` (one sparse product); with
+        no grid, only these values are used, so only these are checked (a ValueError naming
+        the file if one is not finite)."""
+        mix = prepared["mix"]
+        exact = mix(of.cell_values, of.boundary)
+        if not grid_fallback and not np.isfinite(np.add.reduce(exact[mix.found], axis=None)):
+            where = p / names[k]
+            finite(of.cell_values, where)  # names the cells
+            raise ValueError(f"{os.fspath(where / field)}: boundary values the prepared points "
+                             f"use are not finite")
+        return exact
+
     def load(k: int):
+        exact = None
         try:
-            of = read(k)
+            # the first snapshot fixes the geometry and the graded grid: checked whole; with
+            # no grid, a later one is checked where the prepared points use it
+            of = read(k, whole=grid_fallback or not prepared)
+            if prepared and not grid_fallback:
+                exact = exact_values(k, of)
         except ValueError as err:  # a flagged window, the other snapshots kept
             warnings.warn(f"{err}; snapshot t = {times[k]:g} s is NaN (its LOS flagged "
                           f"BEAM_OUTSIDE)", stacklevel=2)
@@ -202,15 +225,17 @@ def _openfoam_sequence(case, *, field, region, spacing, time_range, dtype, max_s
             grid = GridField(*axes, velocity)
         if "mix" not in prepared:
             return grid
-        n = prepared["geometry"].n_points
-        exact = (np.full((n, 4, 3), np.nan) if of is None
-                 else prepared["mix"](of.cell_values, of.boundary))
+        n = prepared["tets"].n_points
+        if of is None:
+            exact = np.full((n, 4, 3), np.nan)
+        elif exact is None:
+            exact = prepared["mix"](of.cell_values, of.boundary)
         return grid, exact
 
     def assemble(window_times, snaps):
         grid = SnapshotField(window_times, [g for g, _ in snaps])
-        return CellPointSnapshots(grid, prepared["geometry"], np.stack([e for _, e in snaps]),
-                                  resolution=prepared.get("resolution"))
+        return CellPointSnapshots(grid, prepared["tets"], np.stack([e for _, e in snaps]),
+                                  axes=prepared.get("graded"))
 
     return FieldSequence(times, load, max_snapshots=max_snapshots, name=name,
                          assemble=assemble if exact_at is not None else None)
@@ -308,8 +333,8 @@ def load_field_sequence(
     - `max_snapshots`: the most snapshots held at once (a window; at least 2).
     - `exact_at`: OpenFOAM only: the points the run will sample, ``(n, 3)`` absolute CFD
       metres, or a function of the first snapshot's `GridField` returning them (the probe's
-      nodes depend on its resolution: ``lambda g: lidarjax.io.simulate_points(scan, mount,
-      heights, lidarjax.probe_for_field(g, scan, heights, probe))`` for a fixed profiler).
+      nodes depend on its spacing along the beams: ``lidarjax.ExactPoints(scan, mount,
+      heights, probe)`` for a fixed profiler, the nodes `lidarjax.simulate_series` chooses).
       Each window is then a `lidarjax.io.CellPointSnapshots`: at those points every
       snapshot is the mesh's own cellPoint (what OpenFOAM's `probes` report), linear in time
       between snapshots; the graded grid answers any other point (a moving lidar's). The
@@ -325,7 +350,10 @@ def load_field_sequence(
     A snapshot whose time directory holds a changed mesh (`polyMesh`), whose velocity cannot
     be read (missing on a processor, truncated, corrupt) or has non-finite values is NaN,
     with a one-line warning naming the time directory: the LOS whose times fall next to it
-    are NaN (flagged ``BEAM_OUTSIDE``), every other snapshot is kept.
+    are NaN (flagged ``BEAM_OUTSIDE``), every other snapshot is kept. Non-finite values are
+    looked for in the whole mesh, except with ``grid_fallback=False`` after the first good
+    snapshot: there only the values the prepared points use are read into the run, and only
+    those are checked (a non-finite value elsewhere in the mesh does not flag the snapshot).
 
     **Returns:** a `lidarjax.FieldSequence` (pass it to `lidarjax.simulate_series` as the
     field). Raises `ValueError` naming the file for fewer than two snapshots, times that do

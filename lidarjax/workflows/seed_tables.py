@@ -21,10 +21,10 @@ from .._backend import default_batch, positive_size
 from .._util import import_optional
 from ..angles import horizontal_speed, seed_azimuth
 from ..batch import simulate_rotations, stack_fields
+from ..beam import ExactPoints
 from ..field import GridField, IndexedPoints
 from ..footprint import scan_bounds
-from ..forward import Simulation, beam_gradient, probe_for_field, simulate
-from ..io import simulate_points
+from ..forward import Simulation, beam_gradient, simulate
 from ..io.settings import Settings
 from ..mount import Mount
 from ..progress import AbstractProgress, LineProgress, progress_meter
@@ -84,34 +84,6 @@ def settings_mounts(settings: Settings, betas: Sequence[float], *, pitch: float 
     (degrees). `settings_mount` gives the same as one batched `Mount`."""
     return [Mount(settings.location(b), beta=b, gamma=settings.gamma, psi=settings.psi,
                   epsilon=settings.epsilon, pitch=pitch, roll=roll) for b in betas]
-
-
-class ExactPoints:
-    """``grid -> points``: every point `simulate` samples for one mount (`simulate_points`),
-    the probe's nodes chosen for the grid's resolution (`probe_for_field`), as
-    `lidarjax.io.load_field`'s `exact_at` takes it; a mesh loaded with it is exact (the mesh's
-    own cellPoint) at those points. The probe chosen is kept as `probe` (None until called),
-    so that `simulate` is given the same nodes without choosing them again.
-
-    The one place the profiler paths (`simulate --field`, `build_table`, `simulate_settings`,
-    `sensitivity_report`) prepare their points. A plain class, so Dask can ship it.
-
-    **Arguments:** `scan`, `mount` (one, not a batch), `heights` (m above the lidar) and
-    `probe` (None: the point probe) as given to `simulate`.
-    """
-
-    def __init__(self, scan, mount: Mount, heights, probe=None):
-        self.scan, self.mount, self.probe_given = scan, mount, probe
-        self.heights = np.asarray(heights, np.float64)
-        self.probe = None
-
-    def __call__(self, grid) -> np.ndarray:
-        used = self.probe_given
-        if used is not None:
-            used = probe_for_field(grid, self.scan, jnp.asarray(self.heights), used,
-                                   mount=self.mount, caller="exact points")
-        self.probe = used
-        return simulate_points(self.scan, self.mount, self.heights, used)
 
 
 def _takes_exact_at(load) -> bool:

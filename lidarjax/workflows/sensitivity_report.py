@@ -153,7 +153,7 @@ def sensitivity_report(
     - `fields`: the CFD run of each rotation: a sequence in the order of `betas`, a mapping
       ``{beta: field}``, a function of beta, or one field for all; paths are read with
       `lidarjax.io.load_field`, a mesh (OpenFOAM case, VTK file) exact at every point its
-      rotation samples (`lidarjax.workflows.seed_tables.ExactPoints`: the mesh's own
+      rotation samples (`lidarjax.ExactPoints`: the mesh's own
       cellPoint there; the graded grid answers only the Monte Carlo's perturbed points).
     - `std`: ``{input: standard uncertainty}`` in the input's unit (`lidarjax.uncertainty`),
       e.g. ``{"epsilon": 0.5, "pitch": 0.2, "location": (0.05, 0.05, 0.1)}``.

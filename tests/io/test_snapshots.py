@@ -5,6 +5,7 @@ tests/data/openfoam_transient/README.md)."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -17,6 +18,7 @@ import lidarjax as lj
 from lidarjax.io import load_field_sequence, sample_openfoam, save_field_npz
 from lidarjax.io.monitor_points import read_openfoam_probes
 from tests._foamwrite import hex_mesh, write_polymesh, write_vector_field
+from tests._transient import probe_los
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "openfoam_transient" / "case"
 
@@ -145,17 +147,11 @@ def _probe_errors(series, probes, mp, heights):
     """Per height: max |LOS - OpenFOAM's probes interpolated between the snapshot times|,
     the probes projected on the beam from the lidar (independent geometry)."""
     los, t_los = np.asarray(series.los), np.asarray(series.los_time)
-    lidar = np.array([150.0, 60.0, 0.0])
-    snap = np.arange(10.0, 30.1, 2.0)
-    rows = [int(np.argmin(np.abs(probes.times - t))) for t in snap]
     err = np.zeros(heights.size)
     for i, h in enumerate(heights):
         for b in range(5):
-            j = int(np.flatnonzero((mp.height == h) & (mp.beam == b))[0])
-            d = probes.header_points[j] - lidar
-            series_j = probes.values[:, j] @ (d / np.linalg.norm(d))
-            err[i] = max(err[i], np.max(np.abs(
-                los[:, i, b] - np.interp(t_los[:, i, b], snap, series_j[rows]))))
+            ref = probe_los(probes, mp, h, b, t_los[:, i, b])
+            err[i] = max(err[i], np.max(np.abs(los[:, i, b] - ref)))
     return err
 
 
@@ -235,40 +231,56 @@ def test_each_snapshot_read_once_and_bad_time_directories_flagged(tmp_path, monk
 
 def _probe_errors_window(series, probes, mp, heights, mask):
     los, t_los = np.asarray(series.los), np.asarray(series.los_time)
-    lidar = np.array([150.0, 60.0, 0.0])
-    snap = np.arange(10.0, 30.1, 2.0)
-    rows = [int(np.argmin(np.abs(probes.times - t))) for t in snap]
     err = 0.0
     for i, h in enumerate(heights):
         for b in range(5):
-            j = int(np.flatnonzero((mp.height == h) & (mp.beam == b))[0])
-            d = probes.header_points[j] - lidar
-            ref = np.interp(t_los[:, i, b], snap, (probes.values[:, j] @ (d / np.linalg.norm(d)))[rows])
+            ref = probe_los(probes, mp, h, b, t_los[:, i, b])
             m = mask[:, i, b]
             err = max(err, float(np.max(np.abs(los[m, i, b] - ref[m]), initial=0.0)))
     return err
 
 
 def test_nonfinite_snapshot_is_flagged_not_fatal(tmp_path):
-    """A snapshot with a non-finite cell value: one warning naming its file, NaN there."""
+    """A snapshot with a non-finite cell value where the prepared points use it: one warning
+    naming its file, NaN there. With no grid, a non-finite value in a cell no prepared point
+    uses flags nothing: the snapshot's values at the points are exact."""
     case = _transient_copy(tmp_path, ("10", "12", "14"))
     from lidarjax.io.openfoam import _read_vector_field, read_openfoam_mesh
     from tests._foamwrite import write_vector_field
 
-    mesh = read_openfoam_mesh(case)
-    values, _ = _read_vector_field(case / "12" / "U", mesh)
-    values[5, 0] = np.inf
-    bnd = {name: ("zeroGradient", None) for name, *_ in mesh.patches}
-    write_vector_field(case, "12", "U", values, bnd, binary=False)
     scan, mount = lj.windcube_v2(), lj.Mount([150.0, 60.0, 0.0])
     pts = lj.io.simulate_points(scan, mount, HEIGHTS[:1])
-    seq = load_field_sequence(case, exact_at=pts, region=lj.scan_bounds(scan, mount, HEIGHTS[:1]),
-                              grid_fallback=False)
-    with pytest.warns(UserWarning, match=r"12/U: 1 cell values are not finite"):
+    of = lj.io.read_openfoam_field(case, time="12")
+    near = of.cells_in_box(pts[0], pts[0])  # the cells around the first point
+    lo, hi = of.bounds
+    far = int(np.argmax(np.min(np.linalg.norm(0.5 * (lo + hi)[:, None] - pts[None], axis=2),
+                               axis=1)))  # the cell farthest from every point
+    mesh = read_openfoam_mesh(case)
+    good, _ = _read_vector_field(case / "12" / "U", mesh)
+    bnd = {name: ("zeroGradient", None) for name, *_ in mesh.patches}
+
+    def window(bad_cells):
+        values = good.copy()
+        values[bad_cells, 0] = np.inf
+        write_vector_field(case, "12", "U", values, bnd, binary=False)
+        seq = load_field_sequence(case, exact_at=pts, grid_fallback=False,
+                                  region=lj.scan_bounds(scan, mount, HEIGHTS[:1]))
         w = seq.window(0, 2)
-    o = np.asarray(w.origin, np.float64) + np.asarray(w.origin_lo, np.float64)
-    v = np.asarray(w.sample_local_at(jnp.asarray(pts - o), jnp.asarray([1.0, 3.0])[:, None]))
-    assert np.isnan(v).all()  # both intervals touch the bad snapshot
+        o = np.asarray(w.origin, np.float64) + np.asarray(w.origin_lo, np.float64)
+        t = np.asarray(w.times, np.float64)  # between the snapshots, at the bad one, between
+        q = np.array([(t[0] + t[1]) / 2, t[1], (t[1] + t[2]) / 2])
+        return np.asarray(w.sample_local_at(jnp.asarray(pts - o), jnp.asarray(q)[:, None]))
+
+    with pytest.warns(UserWarning, match=rf"12/U: {near.size} cell values are not finite"):
+        v = window(near)
+    assert np.isnan(v[[0, 2]]).all()  # both intervals touch the bad snapshot
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        v = window([far])
+    ref = sample_openfoam(case, pts, time="12")  # the far cell: no point's value
+    assert np.isfinite(ref).any()
+    np.testing.assert_allclose(v[1], ref, rtol=0, atol=1e-10)
+    assert np.isfinite(v[:, np.isfinite(ref).all(axis=1)]).all()  # no interval flagged
 
 
 @pytest.mark.parametrize("which", ["decomposed", "compressed"])
@@ -363,3 +375,30 @@ def test_decomposed_sequence_missing_a_processors_time_is_flagged(tmp_path):
     t0, t1 = (float(t) for t in w.times)
     np.testing.assert_allclose(np.asarray(w.sample_local_at(q, t0)), ref, atol=1e-10)
     assert np.isnan(np.asarray(w.sample_local_at(q, 0.5 * (t0 + t1)))).all()
+
+
+def test_a_sequence_prepares_the_points_simulate_series_samples():
+    """A tilted, turned Windcube V2 with the pulsed probe: the sequence prepared with
+    `ExactPoints` (the node choice with the mount) holds exactly the points
+    `simulate_series` samples, so with no graded grid behind them every LOS is answered
+    (none NaN, none flagged). Here the choice with the mount (per height: fewer nodes
+    where the beams see coarser cells) is not the mount-less one (the finest spacing's
+    count everywhere): a series choosing without it would sample points not prepared."""
+    from lidarjax.beam import ExactPoints
+
+    scan, probe, h = lj.windcube_v2(), lj.PulsedProbe(), np.array([10.0, 20.0, 40.0])
+    mount = lj.Mount([150.0, 60.0, 0.0], beta=30.0, pitch=3.0, roll=-2.0)
+    points = ExactPoints(scan, mount, h, probe)
+    seq = load_field_sequence(DATA, region=lj.scan_bounds(scan, mount, h, probe=probe),
+                              exact_at=points, grid_fallback=False, time_range=(10.0, 16.0))
+    w = seq.window(0, 1)
+    chosen = lj.probe_for_field(w, scan, h, probe, mount=mount)
+    assert isinstance(chosen, lj.beam.GradedProbe)  # nodes per height along the beams
+    assert chosen.node_counts == points.probe.node_counts
+    single = lj.probe_for_field(w, scan, h, probe).n_nodes  # without the mount
+    assert chosen.node_counts != (single,) * h.size, (chosen.node_counts, single)
+    o = np.asarray(w.origin, np.float64) + np.asarray(w.origin_lo, np.float64)
+    local = (lj.io.simulate_points(scan, mount, h, chosen) - o).astype(w.dtype)
+    np.testing.assert_array_equal(np.asarray(w.points_local), local)
+    s = lj.simulate_series(seq, scan, mount, h, (10.0, 5.0), probe=probe)
+    assert np.isfinite(np.asarray(s.los)).all() and not np.asarray(s.los_flags).any()
