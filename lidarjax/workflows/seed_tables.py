@@ -24,7 +24,7 @@ from ..batch import simulate_rotations, stack_fields
 from ..beam import ExactPoints
 from ..field import GridField, IndexedPoints
 from ..footprint import scan_bounds
-from ..forward import Simulation, beam_gradient, simulate
+from ..forward import Simulation, beam_gradient, probe_for_field, simulate
 from ..io.settings import Settings
 from ..mount import Mount
 from ..progress import AbstractProgress, LineProgress, progress_meter
