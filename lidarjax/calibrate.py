@@ -93,9 +93,10 @@ record, and noise that varies between records, are accounted for), scaled by
 the residuals. 95 % intervals are ``offset +- 1.96 std``.
 
 The code follows the steps of the computation: `_checked` (arguments, before computing),
-`_flattened` (records to record-height problems), `_model_of` (the table as a
-`_CalibrationModel`), `_solve` (the compiled Gauss--Newton passes), `_covariance` and
-`_result`.
+then per table `_fit_table`: `_flattened` (records to record-height problems), `_model_of`
+(the table as a `_CalibrationModel`), `_solve` (the compiled Gauss--Newton passes) and
+`_covariance`; `calibrate` itself rebuilds the table at the estimate when given its runs,
+and `_result` makes the `Calibration`.
 
 Angles in degrees, north frame, meteorological directions (from, clockwise from north).
 """
@@ -104,6 +105,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -744,6 +746,52 @@ def _result(names, sol, free, ident, cov, sigma2, nominal, header, n_rec, notes,
         notes=tuple(notes))
 
 
+class _Fit(NamedTuple):
+    """One fit of the records to one table (`_fit_table`): the model and its notes, the
+    solution, the offsets fitted (`fit`) and held as a nuisance (`weak`) ``(3,)``, what is
+    identifiable, the covariance ``(3, 3)``, the residual variance and the records used."""
+
+    model: _CalibrationModel
+    notes: list
+    sol: _Solution
+    fit: np.ndarray
+    weak: np.ndarray
+    ident: np.ndarray
+    cov: np.ndarray
+    sigma2: float
+    n_rec: int
+
+
+def _fit_table(table, data, free, north_offset, anchor, start, iterations, covariance
+               ) -> _Fit:
+    """The offsets in `free` fitted to the records `data` ``(los, weights, ref_speed,
+    ref_dir, min_beams, with_ref, dtype)`` through `table`, starting at `start` and with
+    a nuisance offset's ridge held at `anchor` (``(3,)`` degrees from the table's
+    installation)."""
+    los, weights, ref_speed, ref_dir, min_beams, with_ref, dtype = data
+    problems = _flattened(los, table, weights, ref_speed, ref_dir, min_beams, with_ref, dtype)
+    model, notes = _model_of(table, dtype, north_offset)
+    fit = free.copy()
+    weak = np.zeros(3, bool)
+    if not with_ref and free[0]:
+        notes.append(_NOT_IDENTIFIABLE_EPSILON)
+        if model.turn_beams and model.gradient is not None:
+            # the turn itself is taken up by the records' directions, but where the flow
+            # varies in space it also moves the measurement points: that part is fitted (a
+            # nuisance, held by a ridge where the records cannot tell it), so that it does
+            # not go into the tilt
+            weak[0] = True
+            notes.append(_EPSILON_AS_NUISANCE)
+        else:
+            fit[0] = False
+    sol = _solve(model, problems, jnp.asarray(fit), jnp.asarray(weak),
+                 jnp.asarray(anchor, dtype), jnp.asarray(start, dtype),
+                 jnp.asarray(int(iterations), jnp.int32), int(los.shape[0]), bool(with_ref))
+    n_rec = int(sol.n_records)
+    ident, cov, sigma2 = _covariance(sol, fit, weak, with_ref, n_rec, covariance)
+    return _Fit(model, notes, sol, fit, weak, ident, cov, sigma2, n_rec)
+
+
 def _check_runs(runs, table, refinements) -> None:
     """`calibrate`'s `runs` and `refinements` checked against the table, before computing."""
     if not isinstance(runs, TableRuns):
@@ -853,44 +901,22 @@ def calibrate(
     dtype = los.dtype if jnp.issubdtype(los.dtype, jnp.floating) else table.dtype
     with_ref = reference is not None
     free = np.array([x in names for x in CALIBRATION_PARAMETERS])
-    nominal = None
+    data = (los, weights, ref_speed, ref_dir, min_beams, with_ref, dtype)
     total = np.zeros(3)  # the offsets of the current table's installation from the first's
-    rebuilds, moved = 0, math.inf
     start = np.zeros(3)  # where each fit starts, degrees from the current table's installation
+    rebuilds, moved, small, nominal = 0, math.inf, 0.0, None
     while True:
-        problems = _flattened(los, table, weights, ref_speed, ref_dir, min_beams, with_ref,
-                              dtype)
-        model, notes = _model_of(table, dtype, north_offset)
-        if nominal is None:
-            nominal = model.nominal
-            if model.gradient is None and runs is None:
-                warnings.warn(f"calibrate: {notes[0]}", stacklevel=2)
-        fit = free.copy()
-        weak = np.zeros(3, bool)
-        if not with_ref and free[0]:
-            notes.append(_NOT_IDENTIFIABLE_EPSILON)
-            if model.turn_beams and model.gradient is not None:
-                # the turn itself is taken up by the records' directions, but where the flow
-                # varies in space it also moves the measurement points: that part is fitted
-                # (a nuisance, held by a ridge where the records cannot tell it), so that it
-                # does not go into the tilt
-                weak[0] = True
-                notes.append(_EPSILON_AS_NUISANCE)
-            else:
-                fit[0] = False
-        n_records = los.shape[0]
         # the nuisance's ridge holds it at the first table's installation, whichever table
         # this is: every rebuild fits one objective from a new linearisation point
-        sol = _solve(model, problems, jnp.asarray(fit), jnp.asarray(weak),
-                     jnp.asarray(-total, dtype), jnp.asarray(start, dtype),
-                     jnp.asarray(int(iterations), jnp.int32),
-                     int(n_records), bool(with_ref))
-        n_rec = int(sol.n_records)
-        ident, cov, sigma2 = _covariance(sol, fit, weak, with_ref, n_rec, covariance)
-        step = np.where(fit, np.asarray(sol.theta, np.float64), 0.0)
+        f = _fit_table(table, data, free, north_offset, -total, start, iterations, covariance)
+        if nominal is None:
+            nominal = f.model.nominal
+            if f.model.gradient is None and runs is None:
+                warnings.warn(f"calibrate: {f.notes[0]}", stacklevel=2)
+        step = np.where(f.fit, np.asarray(f.sol.theta, np.float64), 0.0)
         if north_offset == "site":  # the table's turn is a relabelling: not accumulated
             total[0] = 0.0
-        if weak[0] and rebuilds > 0:
+        if f.weak[0] and rebuilds > 0:
             # a nuisance turn the records hardly tell is built into the geometry once (the
             # first fit's); later fits keep it as a first-order nuisance about that turn:
             # fed back, its flat direction makes the rebuilds cycle
@@ -899,21 +925,21 @@ def calibrate(
         total = total + step
         if runs is None:
             break
-        shown = fit & ~weak & ident
+        shown = f.fit & ~f.weak & f.ident
         moved = float(np.max(np.abs(step[shown]), initial=0.0))
-        std = np.sqrt(np.diag(cov)[shown])
-        small = REFINE_SHARE * float(np.min(std, initial=math.inf))
-        if not np.all(np.isfinite(step)) or moved <= max(small, TOLERANCE) \
-                or rebuilds >= refinements:
+        small = max(REFINE_SHARE * float(np.min(np.sqrt(np.diag(f.cov)[shown]),
+                                                initial=math.inf)), TOLERANCE)
+        if not np.all(np.isfinite(step)) or moved <= small or rebuilds >= refinements:
             break
         # iterate on the exact geometry: the table of the instrument at the estimate, from
         # which the offsets left are small, so the linearisation's error falls quadratically
         table = runs.table(total, north_offset)
         rebuilds += 1
+    notes = list(f.notes)
     if runs is not None:
         notes = [x for x in notes if not x.startswith("model:")]
         notes.append(_refined_note(rebuilds, moved, refinements))
-    sol = eqx.tree_at(lambda x: x.theta, sol, jnp.asarray(total, sol.theta.dtype))
-    return _result(names, sol, fit & ~weak, ident, cov, sigma2, nominal, header,
-                   n_rec, notes, dtype, rebuilds=rebuilds,
-                   refined=runs is None or moved <= max(small, TOLERANCE))
+    sol = eqx.tree_at(lambda x: x.theta, f.sol, jnp.asarray(total, f.sol.theta.dtype))
+    return _result(names, sol, f.fit & ~f.weak, f.ident, f.cov, f.sigma2, nominal, header,
+                   f.n_rec, notes, dtype, rebuilds=rebuilds,
+                   refined=runs is None or moved <= small)
