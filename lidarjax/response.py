@@ -764,6 +764,13 @@ class TableRuns(eqx.Module):
             if not mounts or not all(isinstance(m, Mount) for m in mounts):
                 raise ValueError(f"{name}: `mount` must be a lidarjax.Mount or a sequence of "
                                  "them (one per run).")
+        if not isinstance(scan, Scan):
+            raise ValueError(f"{name}: `scan` must be a profiling lidarjax.Scan "
+                             f"(lidarjax.windcube_v2(), ...), got {type(scan).__name__}.")
+        hh = np.atleast_1d(np.asarray(heights, np.float64))
+        if hh.ndim != 1 or not hh.size or not np.all(np.isfinite(hh) & (hh > 0)):
+            raise ValueError(f"{name}: `heights` must be finite positive metres above the "
+                             f"lidar, shaped (h,); got {hh.tolist()}.")
         u = np.asarray(u_ref, np.float64)
         counts = {len(x) for x in (fields, mounts) if isinstance(x, list)}
         if u.ndim == 2:

@@ -125,6 +125,12 @@ def test_bad_runs_refused(roof):
     other = cs.runs(cs.setting("hemisphere", heights=[10.0, 30.0]))
     with pytest.raises(ValueError, match="heights"):
         lj.calibrate(los, table, runs=other)
+    three = [lj.scenes.uniform(10.0, d) for d in (0.0, 120.0, 240.0)]
+    with pytest.raises(ValueError, match="profiling"):
+        lj.TableRuns(three, lj.Mount([0.0, 0.0, 0.0]), np.ones((3, 3)),
+                     lj.ppi(5.0, [100.0, 200.0]), [10.0])
+    with pytest.raises(ValueError, match="heights"):
+        lj.TableRuns(three, lj.Mount([0.0, 0.0, 0.0]), np.ones((3, 3)), cs.SCAN, [10.0, -1.0])
     with pytest.raises(ValueError, match="same number of runs"):
         lj.TableRuns([runs.fields] * 3, [lj.Mount([0.0, 0.0, 0.0])] * 4, np.ones((3, 3)),
                      cs.SCAN, [10.0])
