@@ -36,6 +36,7 @@ from ..workflows.seed_results import write_seed_results
 from ..workflows.seed_tables import settings_mount, settings_probes, table_region
 from ._common import (
     add_probe_arguments,
+    add_tilt_arguments,
     field_paths,
     finite_float,
     make_probe,
@@ -87,6 +88,7 @@ def register(sub) -> None:
                                                  "file's beta)")
     which.add_argument("--all", action="store_true", help="every beta row of the settings")
     pr.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v2")
+    add_tilt_arguments(pr)
     pr.add_argument("--cone-angle", type=positive_float, default=None,
                     help="cone angle in degrees (default: the scan's)")
     pr.add_argument("--heights", type=_heights, default=None,
@@ -126,9 +128,10 @@ def _configuration(args):
     for b in betas:
         settings.location(b)  # a ValueError naming the missing row
     heights = np.asarray(args.heights if args.heights is not None else settings.heights())
-    scan = make_scan(args.scan, args.cone_angle)
+    scan = make_scan(args.scan, args.cone_angle, tilt_compensation=args.tilt_compensation)
     probes = _simulate_nodes(args, settings, betas, heights, scan, make_probe(args))
-    mounts = settings_mount(settings, betas)
+    # the installation's tilt moves every beam's points, as `lidarjax simulate --pitch/--roll`
+    mounts = settings_mount(settings, betas, pitch=args.pitch, roll=args.roll)
     locs = monitor_points(scan, mounts, heights, probes)
     return settings, betas, heights, scan, probes, mounts, locs
 
@@ -168,10 +171,12 @@ def _simulate_nodes(args, settings, betas, heights, scan, probe) -> list:
             check_field_file(path)
 
         def load(b, exact_at=None):  # as `lidarjax simulate --field` reads each run
-            region = table_region(settings, [b], scan, probe=probe)
+            region = table_region(settings, [b], scan, probe=probe, pitch=args.pitch,
+                                  roll=args.roll)
             return load_field(paths[b], region=region, exact_at=exact_at)
 
-        chosen = settings_probes(settings, betas, load, scan, probe, heights=heights)
+        chosen = settings_probes(settings, betas, load, scan, probe, heights=heights,
+                                 pitch=args.pitch, roll=args.roll)
         probes = [chosen[float(b)] for b in betas]
     counts = [_counts(p) for p in probes]
     if len(set(counts)) == 1:
@@ -197,6 +202,7 @@ def run(args) -> int:
             "probe_nodes": " ".join(f"{b:g}:{_counts(p)}" for b, p in zip(betas, probes, strict=True)),
             "probe_scale": args.probe_scale,
             "betas_deg": " ".join(f"{b:g}" for b in betas),
+            "pitch_deg": float(args.pitch), "roll_deg": float(args.roll),
             "heights_m": " ".join(f"{h:g}" for h in heights),
             "frame": "absolute CFD coordinates, m; sample U (m/s, CFD frame)"}
     foam = write_openfoam_probes(out / args.name, locs, metadata=meta)
@@ -228,7 +234,7 @@ def _read(args) -> int:
                                         u_ref=args.u_ref)
     write_seed_results(args.out, settings, dict(zip(betas, sims, strict=True)),
                        scan=args.scan, u_ref=args.u_ref, sources=str(src),
-                       settings_file=args.settings, log=print)
+                       settings_file=args.settings, pitch=args.pitch, roll=args.roll, log=print)
     return 0
 
 

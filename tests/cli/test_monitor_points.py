@@ -56,3 +56,34 @@ def test_cli_old_name_probes_still_works_with_one_deprecation_line(tmp_path, cap
     assert capsys.readouterr().err == ""
     old = (tmp_path / "old" / "lidarProbes.csv").read_text()
     assert old == (tmp_path / "new" / "lidarProbes.csv").read_text()
+
+
+def test_cli_tilted_installation_writes_and_reads_what_simulate_samples(tmp_path):
+    # --pitch/--roll move every beam's points as `simulate` moves them: the written points
+    # are the tilted mount's, and the samples read back give simulate's tilted results
+    loc = np.array([[4.0, 3.0, 20.1]])
+    write_settings(tmp_path / "settings.dat", Settings(
+        zone=2, verbose=1, height=40.0, nh=2, gamma=5.0, beta=0.0, psi=180.0, epsilon=21.0,
+        betas=np.array([0.0]), locations=loc))
+    base = ["monitor-points", str(tmp_path / "settings.dat"), "--heights", "10,40",
+            "--pitch", "2.5", "--roll", "-1.5"]
+    assert main(base + ["--out", str(tmp_path / "p")]) == 0
+    locs = read_monitor_points_csv(tmp_path / "p" / "lidarProbes.csv")
+    mount = lj.Mount(loc[0], beta=0.0, gamma=5.0, psi=180.0, epsilon=21.0, pitch=2.5,
+                     roll=-1.5)
+    ref = lj.simulate(SCENE, SCAN, mount, [10.0, 40.0], u_ref=U_REF)
+    focus = np.asarray(ref.points).reshape(-1, 3)  # (h * b, 3) the tilted focus points
+    dist = np.min(np.linalg.norm(np.asarray(locs.points)[None] - focus[:, None], axis=-1), 1)
+    assert dist.max() < 1e-9
+    level = lj.simulate(SCENE, SCAN, lj.Mount(loc[0], beta=0.0, gamma=5.0, psi=180.0,
+                                              epsilon=21.0), [10.0, 40.0]).points
+    assert np.abs(np.asarray(level) - np.asarray(ref.points)).max() > 0.3  # the tilt matters
+    values = np.asarray(SCENE.sample(locs.points))
+    write_probes_output(tmp_path / "pp" / "lidarProbes" / "500" / "U", locs, [(500, values)])
+    assert main(base + ["--sampled", str(tmp_path / "pp" / "lidarProbes"), "--u-ref",
+                        ",".join(map(str, U_REF)), "--out", str(tmp_path / "r")]) == 0
+    from lidarjax.io import read_table_csv
+
+    cols = read_table_csv(tmp_path / "r" / "simulation_0.csv").columns
+    np.testing.assert_allclose(cols["U_mag_lidar"], np.asarray(ref.lidar_speed), atol=1e-12)
+    np.testing.assert_allclose(cols["cff_U"], np.asarray(ref.cff_U), atol=1e-12)
