@@ -22,6 +22,7 @@ horizontal free streams and the right scale for the horizontal ``cff_U``.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -44,10 +45,13 @@ def _norm(v):
 def safe_ratio(num, den, scale, tol):
     """``num / den``, NaN unless ``scale > 0`` and ``|den| > tol * scale``.
 
-    Both are divided by `scale` first, so the derivative never squares a tiny denominator.
+    Both are divided by `scale` first, so the derivative never squares a tiny denominator;
+    `scale` is held constant under differentiation (the ratio does not depend on it, and
+    through it the reverse pass would square ``1 / scale``: beyond float32's range at
+    1e-19 m/s).
     """
     ok = (scale > 0) & (jnp.abs(den) > tol * scale)
-    s = jnp.where(ok, scale, 1.0)
+    s = jax.lax.stop_gradient(jnp.where(ok, scale, 1.0))
     safe = jnp.where(ok, den / s, 1.0)
     return jnp.where(ok, (num / s) / safe, jnp.nan)
 

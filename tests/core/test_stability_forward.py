@@ -189,6 +189,10 @@ model_scale = value_and_gradient(_model_scale)
          heights=[0.03, 0.3, 3.0], rho=0.0, theta=0.0, clearance=0.01, scale=1.0)
 @example(speed=60.0, direction=360.0, cone=60.0, beta=90.0, gamma=0.0, psi=180.0, eps=0.0,
          heights=[0.03, 0.04, 0.05], rho=0.33, theta=1.0, clearance=0.01, scale=1.0)
+# found by hypothesis: a free stream of 3e-19 m/s (its square still a normal float32) gave
+# inf gradients of the direction addends and cfp_w (the reverse pass squared 1 / speed)
+@example(speed=2.7833376140953104e-19, direction=0.0, cone=5.0, beta=0.0, gamma=0.0, psi=0.0,
+         eps=0.0, heights=[1.0, 1.0, 1.0], rho=0.0, theta=0.0, clearance=0.03125, scale=1.0)
 def test_model_scale_platform_float32(speed, direction, cone, beta, gamma, psi, eps, heights,
                                       rho, theta, clearance, scale):
     loc = deck_location(rho, theta, clearance)
