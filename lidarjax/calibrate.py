@@ -887,8 +887,8 @@ def calibrate(
       each rebuild; without `runs` it stays (see the module docstring). The standard errors
       are the last fit's. A last rebuild that still moved the offsets sets
       ``NOT_CONVERGED``.
-    - `refinements`: most rebuilds with `runs` (0: only say in `notes` what the runs would
-      change, no rebuild).
+    - `refinements`: most rebuilds with `runs` (0: no rebuild, the fit of `table` alone, as
+      without `runs`, with a note).
 
     **Returns:** a `Calibration`. Without a reference, epsilon is NaN with
     ``identifiable = False`` and a note. Raises `ValueError` before computing for unknown
@@ -936,10 +936,14 @@ def calibrate(
         table = runs.table(total, north_offset)
         rebuilds += 1
     notes = list(f.notes)
-    if runs is not None:
+    iterated = runs is not None and refinements > 0
+    if iterated:
         notes = [x for x in notes if not x.startswith("model:")]
         notes.append(_refined_note(rebuilds, moved, refinements))
+    elif runs is not None:
+        notes.append("refinements=0: the table was not built again at the estimate; the "
+                     "linearisation's error stays (see the model line)")
     sol = eqx.tree_at(lambda x: x.theta, f.sol, jnp.asarray(total, f.sol.theta.dtype))
     return _result(names, sol, f.fit & ~f.weak, f.ident, f.cov, f.sigma2, nominal, header,
                    f.n_rec, notes, dtype, rebuilds=rebuilds,
-                   refined=runs is None or moved <= small)
+                   refined=not iterated or moved <= small)

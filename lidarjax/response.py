@@ -810,10 +810,6 @@ class TableRuns(eqx.Module):
                                      PointProbe() if probe is None else probe,
                                      mount=self.mounts, caller=name)
 
-    @property
-    def n_runs(self) -> int:
-        return int(self.u_ref.shape[0])
-
     def mounts_at(self, offset=(0.0, 0.0, 0.0), north_offset: str = "instrument") -> Mount:
         """The runs' mounts with the instrument turned and tilted by `offset` ``(d_epsilon,
         d_pitch, d_roll)`` degrees from the nominal installation, as `lidarjax.calibrate`

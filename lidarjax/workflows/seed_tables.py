@@ -377,13 +377,12 @@ def table_runs(settings: Settings, betas: Sequence[float], field_for_beta: Calla
               for m in tilted for dg in (-max_turn, max_turn)]
     corners = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a), *(tilted + turned))
     region = scan_bounds(scan, corners, np.asarray(settings.heights()), probe=probe)
-    fields, seen = [], {}
+    fields, cropped = [], {}  # id -> (the run as read, kept alive; its crop), one per object
     for b in betas:
         f = field_for_beta(b)
-        f = seen.setdefault(id(f), f)
-        if isinstance(f, GridField):
-            f = seen.setdefault(("crop", id(f)), f.crop(*region))
-        fields.append(f)
+        if id(f) not in cropped:
+            cropped[id(f)] = (f, f.crop(*region) if isinstance(f, GridField) else f)
+        fields.append(cropped[id(f)][1])
     return TableRuns(fields, settings_mount(settings, betas, pitch=pitch, roll=roll), u_ref,
                      scan, np.asarray(settings.heights()), probe)
 

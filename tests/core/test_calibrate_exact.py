@@ -87,6 +87,14 @@ def test_large_offsets_come_back_exactly(roof, noise_free, reference):
         # first order about it afterwards (fed back, its flat direction cycles): 2e-4 deg
         assert err_exact.max() < 5e-4, err_exact
     assert err_exact.max() < err_linear.max() / 10
+    # refinements=0: the fit of the given table alone, as without the runs
+    los = noise_free["los"][0]
+    ref = (noise_free["ref_speed"][0], noise_free["ref_direction"][0]) if reference else None
+    plain = lj.calibrate(los, table, reference=ref)
+    none = lj.calibrate(los, table, reference=ref, runs=runs, refinements=0)
+    assert none.converged == plain.converged and int(none.rebuilds) == 0
+    np.testing.assert_array_equal(np.asarray(none.offset), np.asarray(plain.offset))
+    assert any(x.startswith("refinements=0") for x in none.notes)
 
 
 def test_noisy_campaigns_unbiased_with_rebuilds(roof):
