@@ -592,98 +592,160 @@ def build_sampler_and_values(
 ) -> tuple[CellPointSampler, PointValues]:
     """`build_sampler` and the `PointValues` recipe that refills it with another field's
     values on the same mesh."""
-    nc_all = mesh.n_cells
-    in_region = np.zeros(nc_all, bool)
+    ring = _ring_around(mesh, region_cells)
+    sub_cells = ring.cell_local[region_cells]
+    values, n_boundary_points = _point_values(mesh, ring, sub_cells)
+    tet_cell, tet_pts, cto = _region_tets(mesh, ring, region_cells, sub_cells)
+    rcc = ring.cc[sub_cells]
+    inv, tet_ok = _tet_inverses(ring.pxyz, rcc, tet_cell, tet_pts)
+    if bounds is not None:
+        clo, chi = bounds[0][region_cells], bounds[1][region_cells]
+    else:
+        clo, chi = _tet_boxes(ring.pxyz, tet_cell, tet_pts, region_cells.size)
+    cell_v, point_v = values(cell_value, boundary)
+    sampler = CellPointSampler(
+        cell_centre=rcc, cell_value=cell_v, cell_size=chi - clo, cell_lo=clo, cell_hi=chi,
+        point_xyz=ring.pxyz, point_value=point_v, tet_cell=tet_cell, tet_pts=tet_pts,
+        tet_inv=inv, tet_ok=tet_ok, cell_tet_offsets=cto, n_cells_total=mesh.n_cells,
+        n_boundary_points=n_boundary_points,
+    )
+    return sampler, values
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Ring:
+    """A region's points and every cell touching them (the ring), with the ring's geometry.
+
+    `rfaces`: the region cells' faces; `points`: the region's points (global numbers),
+    `plocal`: their local numbers (-1 elsewhere), `pxyz`: their coordinates (m); `tfaces`:
+    the faces touching those points; `cells`: the ring cells (global numbers), `cell_local`:
+    their local numbers (-1 elsewhere); `fctr`, `farea`: centres and area vectors of the ring
+    cells' faces, found at `face_pos[face]`; `cc`: the ring cells' centres."""
+
+    rfaces: np.ndarray
+    points: np.ndarray
+    plocal: np.ndarray
+    pxyz: np.ndarray
+    tfaces: np.ndarray
+    cells: np.ndarray
+    cell_local: np.ndarray
+    fctr: np.ndarray
+    farea: np.ndarray
+    face_pos: np.ndarray
+    cc: np.ndarray
+
+
+def _local_neighbour(mesh: PolyMesh, faces: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """`local[neighbour]` of each of `faces`; -1 for a boundary face."""
+    out = np.full(faces.size, -1, np.int64)
+    internal = faces < mesh.n_internal
+    out[internal] = local[mesh.neighbour[faces[internal]]]
+    return out
+
+
+def _ring_around(mesh: PolyMesh, region_cells: np.ndarray) -> _Ring:
+    """The points of `region_cells`, the cells around them and those cells' geometry."""
+    in_region = np.zeros(mesh.n_cells, bool)
     in_region[region_cells] = True
-    # points of the region cells
     rfaces = _faces_of_cells(mesh, in_region)
     pmask = np.zeros(mesh.points.shape[0], bool)
     flat_r, _, _ = _gather_face_points(mesh, rfaces)
     pmask[flat_r] = True
-    # ring: every cell touching one of those points
     tfaces = _faces_touching(mesh, pmask)
-    ring = np.zeros(nc_all, bool)
+    ring = np.zeros(mesh.n_cells, bool)
     ring[mesh.owner[tfaces]] = True
-    ti = tfaces[tfaces < mesh.n_internal]
-    ring[mesh.neighbour[ti]] = True
+    ring[mesh.neighbour[tfaces[tfaces < mesh.n_internal]]] = True
     ring_cells = np.flatnonzero(ring)
-    cell_local = np.full(nc_all, -1, np.int64)
+    cell_local = np.full(mesh.n_cells, -1, np.int64)
     cell_local[ring_cells] = np.arange(ring_cells.size)
     # all faces of the ring cells, their geometry, the ring's cell centres
     gfaces = _faces_of_cells(mesh, ring)
     fctr, farea = face_geometry(mesh, gfaces)
-    own_l = cell_local[mesh.owner[gfaces]]
-    nei_l = np.full(gfaces.size, -1, np.int64)
-    internal = gfaces < mesh.n_internal
-    nei_l[internal] = cell_local[mesh.neighbour[gfaces[internal]]]
-    cc = cell_centres(fctr, farea, own_l, nei_l, ring_cells.size)
+    cc = cell_centres(fctr, farea, cell_local[mesh.owner[gfaces]],
+                      _local_neighbour(mesh, gfaces, cell_local), ring_cells.size)
     face_pos = np.full(mesh.n_faces, -1, np.int64)
     face_pos[gfaces] = np.arange(gfaces.size)
-
-    # ---- point values (volPointInterpolation) for the region points -------------------
     pts = np.flatnonzero(pmask)
     plocal = np.full(mesh.points.shape[0], -1, np.int64)
     plocal[pts] = np.arange(pts.size)
-    pxyz = mesh.points[pts]
-    flat, offs, _ = _gather_face_points(mesh, tfaces)
+    return _Ring(rfaces=rfaces, points=pts, plocal=plocal, pxyz=mesh.points[pts], tfaces=tfaces,
+                 cells=ring_cells, cell_local=cell_local, fctr=fctr, farea=farea,
+                 face_pos=face_pos, cc=cc)
+
+
+def _point_cell_pairs(mesh: PolyMesh, ring: _Ring) -> tuple[np.ndarray, np.ndarray]:
+    """Each distinct (region point, ring cell) pair that share a face, as local numbers."""
+    flat, offs, _ = _gather_face_points(mesh, ring.tfaces)
     sizes = np.diff(offs)
-    lab_p = plocal[flat]
-    own_rep = np.repeat(cell_local[mesh.owner[tfaces]], sizes)
-    nei_t = np.full(tfaces.size, -1, np.int64)
-    ti_mask = tfaces < mesh.n_internal
-    nei_t[ti_mask] = cell_local[mesh.neighbour[tfaces[ti_mask]]]
-    nei_rep = np.repeat(nei_t, sizes)
+    lab_p = ring.plocal[flat]
+    own_rep = np.repeat(ring.cell_local[mesh.owner[ring.tfaces]], sizes)
+    nei_rep = np.repeat(_local_neighbour(mesh, ring.tfaces, ring.cell_local), sizes)
     pairs_p = np.concatenate([lab_p, lab_p])
     pairs_c = np.concatenate([own_rep, nei_rep])
     ok = (pairs_p >= 0) & (pairs_c >= 0)
-    key = np.sort(pairs_p[ok] * np.int64(ring_cells.size) + pairs_c[ok])
+    n_ring = ring.cells.size
+    key = np.sort(pairs_p[ok] * np.int64(n_ring) + pairs_c[ok])
     key = key[np.concatenate([[True], key[1:] != key[:-1]])] if key.size else key
-    pp, pc = key // ring_cells.size, key % ring_cells.size
+    return key // n_ring, key % n_ring
+
+
+def _point_values(mesh: PolyMesh, ring: _Ring, sub_cells: np.ndarray) -> tuple[PointValues, int]:
+    """volPointInterpolation's weights for the region's points (a `PointValues`) and how many
+    of those points lie on a proper boundary patch."""
+    pp, pc = _point_cell_pairs(mesh, ring)
     # boundary faces among those touching the region points
-    bsel = ~ti_mask
-    bfaces = tfaces[bsel]
-    bvalues = FaceValues.build(mesh, bfaces, farea[face_pos[bfaces]])
-    bproper = bvalues.proper
-    b_ctr = fctr[face_pos[bfaces]]
+    bfaces = ring.tfaces[~(ring.tfaces < mesh.n_internal)]
+    bvalues = FaceValues.build(mesh, bfaces, ring.farea[ring.face_pos[bfaces]])
+    b_ctr = ring.fctr[ring.face_pos[bfaces]]
     bflat, boffs, _ = _gather_face_points(mesh, bfaces)
-    bsizes = np.diff(boffs)
-    bp = plocal[bflat]
-    bface_rep = np.repeat(np.arange(bfaces.size), bsizes)
-    bproper_rep = bproper[bface_rep] & (bp >= 0)
-    is_patch = np.zeros(pts.size, bool)
+    bp = ring.plocal[bflat]
+    bface_rep = np.repeat(np.arange(bfaces.size), np.diff(boffs))
+    bproper_rep = bvalues.proper[bface_rep] & (bp >= 0)
+    n = ring.points.size
+    is_patch = np.zeros(n, bool)
     is_patch[bp[bproper_rep]] = True
     # interior points: inverse distance to the cell centres
-    wsum = np.zeros(pts.size)
+    wsum = np.zeros(n)
     sel = ~is_patch[pp]
-    w_int = 1.0 / np.linalg.norm(pxyz[pp[sel]] - cc[pc[sel]], axis=1)
-    wsum += np.bincount(pp[sel], weights=w_int, minlength=pts.size)
+    w_int = 1.0 / np.linalg.norm(ring.pxyz[pp[sel]] - ring.cc[pc[sel]], axis=1)
+    wsum += np.bincount(pp[sel], weights=w_int, minlength=n)
     # patch points: inverse distance to the proper patch faces' centres, face values
     bpp = bp[bproper_rep]
     bff = bface_rep[bproper_rep]
-    w_b = 1.0 / np.linalg.norm(pxyz[bpp] - b_ctr[bff], axis=1)
-    wsum += np.bincount(bpp, weights=w_b, minlength=pts.size)
+    w_b = 1.0 / np.linalg.norm(ring.pxyz[bpp] - b_ctr[bff], axis=1)
+    wsum += np.bincount(bpp, weights=w_b, minlength=n)
+    values = PointValues(mesh=mesh, ring_cells=ring.cells, sub_cells=sub_cells,
+                         pair_point=pp[sel], pair_cell=pc[sel], pair_weight=w_int,
+                         faces=bvalues, patch_point=bpp, patch_face=bff, patch_weight=w_b,
+                         wsum=wsum)
+    return values, int(is_patch.sum())
 
-    # ---- tetrahedra of the region cells ---------------------------------------------
-    sub_cells = cell_local[region_cells]
-    sub_local = np.full(ring_cells.size, -1, np.int64)
+
+def _region_tets(
+    mesh: PolyMesh, ring: _Ring, region_cells: np.ndarray, sub_cells: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The region cells' tetrahedra, `polyMeshTetDecomposition`: `(tet_cell (n,) region
+    cell, tet_pts (n, 3) local points base, A, B, cell_tet_offsets (nc + 1,))`, by cell."""
+    rfaces = ring.rfaces
+    sub_local = np.full(ring.cells.size, -1, np.int64)
     sub_local[sub_cells] = np.arange(region_cells.size)
     fl, fo, _ = _gather_face_points(mesh, rfaces)
     fsz = np.diff(fo)
-    base = _base_points(mesh, rfaces, fl, fo, cc, cell_local)
-    tets_cell, tets_pts = [], []
-    rown = sub_local[cell_local[mesh.owner[rfaces]]]
+    base = _base_points(mesh, rfaces, fl, fo, ring.cc, ring.cell_local)
+    rown = sub_local[ring.cell_local[mesh.owner[rfaces]]]
     rnei = np.full(rfaces.size, -1, np.int64)
     rint = rfaces < mesh.n_internal
-    rnei[rint] = sub_local[cell_local[mesh.neighbour[rfaces[rint]]]]
+    rnei[rint] = sub_local[ring.cell_local[mesh.neighbour[rfaces[rint]]]]
     ntri = fsz - 2
     fidx = np.repeat(np.arange(rfaces.size), ntri)
     tpt = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1  # 1 .. n-2
     b = base[fidx]
     s = fsz[fidx]
     start = fo[:-1][fidx]
-    p_base = plocal[fl[start + b]]
-    p_a = plocal[fl[start + (b + tpt) % s]]
-    p_b = plocal[fl[start + (b + tpt + 1) % s]]
+    p_base = ring.plocal[fl[start + b]]
+    p_a = ring.plocal[fl[start + (b + tpt) % s]]
+    p_b = ring.plocal[fl[start + (b + tpt + 1) % s]]
+    tets_cell, tets_pts = [], []
     for side, swap in ((rown, False), (rnei, True)):
         cs = side[fidx]
         m = cs >= 0
@@ -698,33 +760,32 @@ def build_sampler_and_values(
     tet_cell, tet_pts = tet_cell[order], tet_pts[order]
     cto = np.zeros(region_cells.size + 1, np.int64)
     np.cumsum(np.bincount(tet_cell, minlength=region_cells.size), out=cto[1:])
-    rcc = cc[sub_cells]
+    return tet_cell, tet_pts, cto
+
+
+def _tet_inverses(
+    pxyz: np.ndarray, rcc: np.ndarray, tet_cell: np.ndarray, tet_pts: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse edge matrices `(n, 3, 3)` (from the cell centre) and which tets are not
+    degenerate; a degenerate tet's inverse is zero."""
     e = np.stack([pxyz[tet_pts[:, k]] - rcc[tet_cell] for k in range(3)], axis=2)  # (n, 3, 3) columns
     inv, det = _inverse3(e)
     scale = np.max(np.abs(e), axis=(1, 2)) ** 3
     tet_ok = np.abs(det) > 1e-12 * np.maximum(scale, 1e-300)
     inv[~tet_ok] = 0.0
-    del e
-    if bounds is not None:
-        clo, chi = bounds[0][region_cells], bounds[1][region_cells]
-    else:
-        clo = np.full((region_cells.size, 3), np.inf)
-        chi = np.full((region_cells.size, 3), -np.inf)
-        for k in range(3):
-            np.minimum.at(clo, tet_cell, pxyz[tet_pts[:, k]])
-            np.maximum.at(chi, tet_cell, pxyz[tet_pts[:, k]])
-    values = PointValues(mesh=mesh, ring_cells=ring_cells, sub_cells=sub_cells, pair_point=pp[sel],
-                         pair_cell=pc[sel], pair_weight=w_int, faces=bvalues,
-                         patch_point=bpp, patch_face=bff,
-                         patch_weight=w_b, wsum=wsum)
-    cell_v, point_v = values(cell_value, boundary)
-    sampler = CellPointSampler(
-        cell_centre=rcc, cell_value=cell_v, cell_size=chi - clo, cell_lo=clo, cell_hi=chi,
-        point_xyz=pxyz, point_value=point_v, tet_cell=tet_cell, tet_pts=tet_pts, tet_inv=inv,
-        tet_ok=tet_ok, cell_tet_offsets=cto, n_cells_total=nc_all,
-        n_boundary_points=int(is_patch.sum()),
-    )
-    return sampler, values
+    return inv, tet_ok
+
+
+def _tet_boxes(
+    pxyz: np.ndarray, tet_cell: np.ndarray, tet_pts: np.ndarray, n_cells: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding boxes `(lo, hi)`, `(n_cells, 3)` each, of each cell's tetrahedra."""
+    clo = np.full((n_cells, 3), np.inf)
+    chi = np.full((n_cells, 3), -np.inf)
+    for k in range(3):
+        np.minimum.at(clo, tet_cell, pxyz[tet_pts[:, k]])
+        np.maximum.at(chi, tet_cell, pxyz[tet_pts[:, k]])
+    return clo, chi
 
 
 def _inverse3(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,28 @@ def parse_float(text: str) -> float:
     if t == "" or t.upper() in ("NA", "N/A"):
         return math.nan
     return float(t)
+
+
+def is_number(text: str, parse: Callable[[str], float] = float) -> bool:
+    """Whether `parse(text)` (default `float`) reads `text` without a `ValueError`."""
+    try:
+        parse(text)
+    except ValueError:
+        return False
+    return True
+
+
+def float_row(fields: Sequence[str], names: Sequence[str], path: PathLike,
+              line: int) -> list[float]:
+    """`float` of each of `fields`; on a bad one raise naming the line, its column in `names`
+    and the text."""
+    try:
+        return [float(f) for f in fields]
+    except ValueError:
+        bad = next(i for i, f in enumerate(fields) if not is_number(f))
+        raise file_error(
+            path, line, f"column {names[bad]!r}: expected a number, found {fields[bad]!r}"
+        ) from None
 
 
 def parse_row(

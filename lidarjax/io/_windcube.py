@@ -38,10 +38,17 @@ from typing import Any
 
 import numpy as np
 
-from .._util import file_error, normalise_key, require_file, summarise_lines
-from ..flags import RecordFlag
+from .._util import file_error, normalise_key, require_file
 from ..progress import progress_meter
-from ._common import offset_timedelta, parse_float, parse_times, parse_utc_offset, read_text
+from ._common import (
+    is_number,
+    offset_timedelta,
+    parse_float,
+    parse_times,
+    parse_utc_offset,
+    read_text,
+)
+from ._records import per_height_arrays, warn_corrupt_rows
 
 __all__: list[str] = []
 
@@ -244,6 +251,35 @@ def read_windcube(
         progress = progress_meter(progress).callback(f"reading {p.name}")
     text = read_text(p)
     lines = text.split("\n")
+    version, header, header_line_of, columns, column_line = _read_header(p, text, lines, what)
+    notes: list[str] = []
+    columns = _unique(columns, notes, p, column_line)
+    header_heights, alt_value = _header_heights(p, header, header_line_of)
+    data = [ln.rstrip("\r") for ln in lines[column_line:]]
+    del lines, text  # keep the peak memory to one copy of the rows
+    time_col = next(i for i, c in enumerate(columns) if _is_time_name(c))
+    columns = _split_stamp_column(columns, data, time_col)
+    mapped, scalar_cols = _map_columns(p, columns, time_col, column_line, header_heights,
+                                       alt_value, gate_quantities, notes)
+    altitudes = set(header_heights) if header_heights is not None else {a for _, a, _ in mapped}
+    heights = np.array(sorted(altitudes), dtype=np.float64)
+    row_lines, times, time_ok, row_ok, values, problems, scalars = _read_rows(
+        data, columns, column_line, time_col, [i for i, _, _ in mapped], scalar_cols, progress)
+    gq = {("v1:" + k.lower()): v for k, v in (gate_quantities or {}).items()}
+    out, extra = per_height_arrays(mapped, values, heights,
+                                   lambda key: quantities.get(key) or gq.get(key))
+    return Parsed(
+        path=p, version=version, header=header, heights=heights, time=times,
+        time_ok=time_ok, row_ok=row_ok, quantities=out, extra=extra, scalars=scalars,
+        scalar_lines=column_line, row_lines=np.array(row_lines, dtype=np.int64),
+        problems=problems, notes=notes, columns=columns,
+    )
+
+
+def _read_header(p: Path, text: str, lines: list[str], what: str):
+    """`(version, header, 1-based line of each header key, column names, their line)`: the
+    first line (`HeaderSize=N` V2 or `HeaderLength=N` V1), the `key=value` lines after it
+    and the column-names line (starting with a time column name)."""
     first = lines[0].rstrip("\r").lstrip("\ufeff")
     m = _FIRST_LINE.match(first)
     if not m:
@@ -254,18 +290,13 @@ def read_windcube(
     version = "V2" if m.group(1).lower() == "headersize" else "V1"
     header: dict[str, str] = {}
     header_line_of: dict[str, int] = {}
-    notes: list[str] = []
-    columns: list[str] | None = None
-    column_line = 0
     for idx in range(1, len(lines)):
         line = lines[idx].rstrip("\r")
         stripped = line.strip()
         if not stripped or set(stripped) <= {"*"}:
             continue
         if _is_time_name(line.split("\t", 1)[0]) and ("\t" in line or "=" not in line):
-            columns = line.split("\t")
-            column_line = idx + 1
-            break
+            return version, header, header_line_of, line.split("\t"), idx + 1
         if "=" in stripped:
             key, _, value = stripped.partition("=")
             header[key.strip()] = value.strip()
@@ -276,31 +307,34 @@ def read_windcube(
                 p, idx + 1, "expected the column-names line starting with 'Timestamp' or "
                 f"'Date', found {stripped[:60]!r}"
             )
-    if columns is None:
+    raise file_error(
+        p, len(text.splitlines()), "no column-names line (starting with 'Timestamp' or 'Date') "
+        "after the header; the file is cut or is not a Windcube record"
+    )
+
+
+_ALTITUDE_KEYS = ("Altitudes (m)", "Altitudes AGL (m)", "Altitude (m)", "Heights (m)")
+
+
+def _header_heights(p: Path, header: dict[str, str], header_line_of: dict[str, int]):
+    """`(altitudes in m or None, their header value as written or None)`."""
+    alt_value = header_lookup(header, *_ALTITUDE_KEYS)
+    if alt_value is None:
+        return None, None
+    wanted = {normalise_key(a) for a in _ALTITUDE_KEYS}
+    alt_key = next(k for k in header if normalise_key(k) in wanted)
+    try:
+        return [float(a) for a in alt_value.replace(",", " ").split()], alt_value
+    except ValueError:
         raise file_error(
-            p, len(text.splitlines()), "no column-names line (starting with 'Timestamp' or 'Date') "
-            "after the header; the file is cut or is not a Windcube record"
-        )
-    columns = _unique(columns, notes, p, column_line)
+            p, header_line_of[alt_key], f"'{alt_key}': expected altitudes in metres, "
+            f"found {alt_value!r}"
+        ) from None
 
-    header_heights: list[float] | None = None
-    alt_names = ("Altitudes (m)", "Altitudes AGL (m)", "Altitude (m)", "Heights (m)")
-    alt_value = header_lookup(header, *alt_names)
-    if alt_value is not None:
-        wanted = {normalise_key(a) for a in alt_names}
-        alt_key = next(k for k in header if normalise_key(k) in wanted)
-        try:
-            header_heights = [float(a) for a in alt_value.replace(",", " ").split()]
-        except ValueError:
-            raise file_error(
-                p, header_line_of[alt_key], f"'{alt_key}': expected altitudes in metres, "
-                f"found {alt_value!r}"
-            ) from None
 
-    data = [ln.rstrip("\r") for ln in lines[column_line:]]
-    del lines, text  # keep the peak memory to one copy of the rows
-    # V1 may split the stamp in two fields (date \t time) under one 'Date' name.
-    time_col = next(i for i, c in enumerate(columns) if _is_time_name(c))
+def _split_stamp_column(columns: list[str], data: list[str], time_col: int) -> list[str]:
+    """The column names with `__time_of_day` where V1 splits the stamp in two fields (date
+    \\t time) under one 'Date' name, or names the second 'Time'."""
     first_row = next((ln for ln in data if ln.strip()), None)
     if first_row is not None:
         f = first_row.split("\t")
@@ -310,7 +344,14 @@ def read_windcube(
                 columns[time_col + 1] = "__time_of_day"  # 'Date' and 'Time' columns
             else:  # one 'Date' name over two fields
                 columns = columns[: time_col + 1] + ["__time_of_day"] + columns[time_col + 1:]
+    return columns
 
+
+def _map_columns(p, columns, time_col, column_line, header_heights, alt_value,
+                 gate_quantities, notes):
+    """`(mapped, scalar columns)`: per-altitude columns as `(column, altitude, quantity
+    key)` (V2 `40m Wind Speed (m/s)`, then V1 gate-numbered ones), every other column by
+    name."""
     mapped: list[tuple[int, float, str]] = []  # (column, altitude, quantity key)
     scalar_cols: dict[str, int] = {}
     seen: dict[tuple[float, str], str] = {}
@@ -344,77 +385,68 @@ def read_windcube(
                 f"header's altitudes {' '.join(alt_value.split()) if alt_value else ''}"
             )
         mapped.append((i, altitude, key))
-
-    # Gate-numbered (V1) columns: a prefix present for gates within 1..len(altitudes).
     if gate_cols and header_heights is not None:
-        by_prefix: dict[str, list[tuple[int, int]]] = {}
-        for i, prefix, gate in gate_cols:
-            by_prefix.setdefault(prefix, []).append((i, gate))
-        n_alt = len(header_heights)
-        gq = {k.lower(): v for k, v in (gate_quantities or {}).items()}
-        for prefix, items in by_prefix.items():
-            gates = [g for _, g in items]
-            known = prefix.lower() in gq
-            if not all(1 <= g <= n_alt for g in gates) or len(set(gates)) != len(gates):
-                continue
-            if not known and len(items) < min(2, n_alt):
-                continue
-            for i, gate in items:
-                key = f"v1:{prefix.lower()}"
-                mapped.append((i, header_heights[gate - 1], key))
-                scalar_cols.pop(columns[i].strip(), None)
-
+        _map_gate_columns(columns, gate_cols, header_heights, gate_quantities, mapped,
+                          scalar_cols)
     if not mapped:
         raise file_error(
             p, column_line, "no per-altitude columns ('40m Wind Speed (m/s)' in V2, or "
             "gate-numbered 'Vhm1' with 'Altitudes(m)=' in the header in V1)"
         )
-    altitudes = set(header_heights) if header_heights is not None else {a for _, a, _ in mapped}
-    heights = np.array(sorted(altitudes), dtype=np.float64)
-    value_cols = [i for i, _, _ in mapped]
-    scalar_items = list(scalar_cols.items())
+    return mapped, scalar_cols
+
+
+def _map_gate_columns(columns, gate_cols, header_heights, gate_quantities, mapped,
+                      scalar_cols) -> None:
+    """Gate-numbered (V1) columns into `mapped` (key `v1:<prefix>`), out of `scalar_cols`: a
+    prefix counts when its gates are distinct, within 1..len(altitudes), and the prefix is
+    known or present for at least 2 gates."""
+    by_prefix: dict[str, list[tuple[int, int]]] = {}
+    for i, prefix, gate in gate_cols:
+        by_prefix.setdefault(prefix, []).append((i, gate))
+    n_alt = len(header_heights)
+    gq = {k.lower(): v for k, v in (gate_quantities or {}).items()}
+    for prefix, items in by_prefix.items():
+        gates = [g for _, g in items]
+        known = prefix.lower() in gq
+        if not all(1 <= g <= n_alt for g in gates) or len(set(gates)) != len(gates):
+            continue
+        if not known and len(items) < min(2, n_alt):
+            continue
+        for i, gate in items:
+            key = f"v1:{prefix.lower()}"
+            mapped.append((i, header_heights[gate - 1], key))
+            scalar_cols.pop(columns[i].strip(), None)
+
+
+def _read_rows(data, columns, column_line, time_col, value_cols, scalar_cols, progress):
+    """The data rows: `(1-based lines, times, time_ok, row_ok, values (t, len(value_cols)),
+    problems, scalar columns' text)`; a bad row's values are NaN and `problems` says why."""
     n_fields = len(columns)
     needed = max([time_col, *value_cols, *scalar_cols.values()]) + 1
     two_part_time = "__time_of_day" in columns
-
-    # Data rows: drop blank lines, keep the 1-based line numbers.
-    row_lines = []
+    row_lines = []  # data rows: drop blank lines, keep the 1-based line numbers
     rows = []
     for j, ln in enumerate(data):
         if ln.strip():
             rows.append(ln)
             row_lines.append(column_line + 1 + j)
-    n = len(rows)
-    problems: list[tuple[int, str]] = []
     counts = np.array([r.count("\t") + 1 for r in rows], dtype=np.int64)
     count_ok = counts >= needed
     # Extra non-empty fields beyond the header's columns mean a shifted row.
-    over = np.zeros(n, dtype=bool)
+    over = np.zeros(len(rows), dtype=bool)
     for i in np.flatnonzero(counts > n_fields):  # trailing empty fields are fine
         over[i] = rows[i].rstrip("\t\r ").count("\t") + 1 > n_fields
     head = time_col + (2 if two_part_time else 1)
     if scalar_cols:
         head = max(head, max(scalar_cols.values()) + 1)
     split = [r.split("\t", head)[:head] for r in rows]  # only the leading fields are kept
-    stamps = []
-    for f in split:
-        if len(f) > time_col:
-            stamps.append(f[time_col] + (" " + f[time_col + 1] if two_part_time and
-                                         len(f) > time_col + 1 else ""))
-        else:
-            stamps.append("")
+    stamps = [(f[time_col] + (" " + f[time_col + 1] if two_part_time and len(f) > time_col + 1
+                              else "")) if len(f) > time_col else "" for f in split]
     times, time_ok = parse_times(stamps)
-    values = np.full((n, len(value_cols)), np.nan)
-    vals_ok = np.zeros(n, dtype=bool)
-    good_idx = np.flatnonzero(count_ok & ~over)
-    for s in range(0, good_idx.size, CHUNK * 4):
-        part = good_idx[s:s + CHUNK * 4]
-        v, ok = _parse_block([rows[i] for i in part], value_cols)
-        values[part] = v
-        vals_ok[part] = ok
-        if progress is not None:
-            progress(min(s + part.size, good_idx.size), good_idx.size)
+    values, vals_ok = _parse_values(rows, np.flatnonzero(count_ok & ~over), value_cols, progress)
     row_ok = count_ok & ~over & vals_ok & time_ok
+    problems: list[tuple[int, str]] = []
     for i in np.flatnonzero(~row_ok):
         if not count_ok[i]:
             why = (f"cut row: expected at least {needed} tab-separated fields, found "
@@ -424,41 +456,38 @@ def read_windcube(
         elif not time_ok[i]:
             why = f"unreadable time stamp {stamps[i].strip()[:40]!r}"
         else:
-            bad = next((columns[c] for c in value_cols
-                        if not _is_number(rows[i].split("\t")[c])), "?")
-            cell = rows[i].split("\t")[columns.index(bad)] if bad in columns else ""
-            why = f"column {bad!r}: expected a number, found {cell.strip()[:30]!r}"
+            why = _bad_cell(rows[i], columns, value_cols)
         problems.append((row_lines[i], why))
         values[i] = np.nan
     scalars: dict[str, list[str]] = {
         name: [f[col].strip() if len(f) > col and col < head else "" for f in split]
-        for name, col in scalar_items
+        for name, col in scalar_cols.items()
     }
-    index = {h: j for j, h in enumerate(heights.tolist())}
-    out: dict[str, np.ndarray] = {}
-    extra: dict[str, np.ndarray] = {}
-    gq = {("v1:" + k.lower()): v for k, v in (gate_quantities or {}).items()}
-    for c, (_, altitude, key) in enumerate(mapped):
-        field = quantities.get(key) or gq.get(key)
-        target = out if field else extra
-        name = field or key.removeprefix("v1:")
-        if name not in target:
-            target[name] = np.full((n, heights.size), np.nan)
-        target[name][:, index[altitude]] = values[:, c]
-    return Parsed(
-        path=p, version=version, header=header, heights=heights, time=times,
-        time_ok=time_ok, row_ok=row_ok, quantities=out, extra=extra, scalars=scalars,
-        scalar_lines=column_line, row_lines=np.array(row_lines, dtype=np.int64),
-        problems=problems, notes=notes, columns=columns,
-    )
+    return row_lines, times, time_ok, row_ok, values, problems, scalars
 
 
-def _is_number(text: str) -> bool:
-    try:
-        parse_float(text)
-    except ValueError:
-        return False
-    return True
+def _parse_values(rows, good_idx, value_cols, progress):
+    """`(values (n, c), ok (n,))` of the `value_cols` of the rows `good_idx`, in blocks
+    (NaN and False elsewhere); `progress` is told the rows done."""
+    n = len(rows)
+    values = np.full((n, len(value_cols)), np.nan)
+    vals_ok = np.zeros(n, dtype=bool)
+    for s in range(0, good_idx.size, CHUNK * 4):
+        part = good_idx[s:s + CHUNK * 4]
+        v, ok = _parse_block([rows[i] for i in part], value_cols)
+        values[part] = v
+        vals_ok[part] = ok
+        if progress is not None:
+            progress(min(s + part.size, good_idx.size), good_idx.size)
+    return values, vals_ok
+
+
+def _bad_cell(row: str, columns: list[str], value_cols: list[int]) -> str:
+    """Why a row of the right shape and a good stamp was not read: its first non-number."""
+    bad = next((columns[c] for c in value_cols
+                if not is_number(row.split("\t")[c], parse_float)), "?")
+    cell = row.split("\t")[columns.index(bad)] if bad in columns else ""
+    return f"column {bad!r}: expected a number, found {cell.strip()[:30]!r}"
 
 
 def scalar_arrays(scalars: Mapping[str, list[str]]) -> dict[str, np.ndarray]:
@@ -529,63 +558,8 @@ def to_utc(local: np.ndarray, hours: float) -> np.ndarray:
 
 def report(parsed: Parsed, kind: str) -> list[str]:
     """Warn once (naming file and lines) about corrupt rows and renamed columns."""
-    msgs = [f"{parsed.path}, line {ln}: {why}; read as a flagged missing {kind}"
-            for ln, why in parsed.problems]
-    if parsed.problems:
-        warnings.warn(
-            f"{parsed.path}: {len(parsed.problems)} corrupt row(s) at line(s) "
-            f"{summarise_lines([ln for ln, _ in parsed.problems])} read as flagged missing "
-            f"{kind}s (first: line {parsed.problems[0][0]}: {parsed.problems[0][1]}); every "
-            "other row was read",
-            stacklevel=3,
-        )
+    msgs = warn_corrupt_rows(parsed.path, parsed.problems, kind, stacklevel=3)
     for note in parsed.notes:
         if "appears" in note or "same quantity" in note:
             warnings.warn(note, stacklevel=3)
     return msgs + list(parsed.notes)
-
-
-def infer_bad_times(time: np.ndarray, ok: np.ndarray, step: np.timedelta64 | None):
-    """Fill unreadable stamps from regular neighbours; returns `(time, inferred, keep)`.
-
-    A bad stamp between good ones whose spacing is an exact multiple of `step` gets the
-    stamp its position implies; a bad stamp that cannot be placed is dropped (`keep` False).
-    """
-    t = time.copy()
-    inferred = np.zeros(t.size, dtype=bool)
-    keep = ok.copy()
-    if step is None or ok.all():
-        return t, inferred, keep | ok
-    good = np.flatnonzero(ok)
-    for i in np.flatnonzero(~ok):
-        before = good[good < i]
-        after = good[good > i]
-        guess = None
-        if before.size:
-            g = time[before[-1]] + (i - before[-1]) * step
-            if not after.size or time[after[0]] - g == (after[0] - i) * step:
-                guess = g
-        elif after.size:
-            guess = time[after[0]] - (after[0] - i) * step
-        if guess is not None:
-            t[i] = guess
-            inferred[i] = True
-            keep[i] = True
-    return t, inferred, keep
-
-
-def regular_step(time: np.ndarray, ok: np.ndarray) -> np.timedelta64 | None:
-    """The median spacing of the readable stamps (None with fewer than 2)."""
-    good = time[ok]
-    if good.size < 2:
-        return None
-    d = np.diff(good)
-    d = d[d > np.timedelta64(0, "ms")]
-    if d.size == 0:
-        return None
-    return np.median(d.astype(np.int64)).astype(np.int64).astype("timedelta64[ms]")
-
-
-def flag_value(flags: np.ndarray, bad: np.ndarray, bit: RecordFlag) -> None:
-    """`flags |= bit` where `bad` (in place)."""
-    flags[bad] |= int(bit)

@@ -293,8 +293,41 @@ def read_hpl(path: PathLike) -> HaloScan:
     truncated file and for rays that are not a whole number of the header's scans.
     """
     p = require_file(path, "Halo .hpl file")
-    text = read_text(p)
-    lines = text.splitlines()
+    lines = read_text(p).splitlines()
+    header, end = _read_header(p, lines)
+    n_gates = _int_field(p, lines, header, "number of gates")
+    gate_length = _float_field(p, lines, header, "range gate length (m)")
+    per_scan_key = next((k for k in ("no. of rays in file", "no. of waypoints in file") if k in header), None)
+    rays_per_scan = _int_field(p, lines, header, per_scan_key) if per_scan_key else None
+    start = _start_time(p, lines, header)
+    first, spacing = _gate_layout(p, lines[:end], gate_length)
+    # The last-line check runs whether or not the file ends with a newline: before this
+    # function was split, `newline_end` was read from the start-time text (which had taken
+    # the name `text`), never from the file, so it was always False. Kept as it behaved.
+    rays, gates, cut = _read_rays(p, lines, end, n_gates, newline_end=False)
+    n = len(rays)
+    _warn_incomplete(p, n, rays_per_scan, per_scan_key, cut)
+    ray = np.asarray(rays)
+    data = np.stack(gates)  # (r, g, 3 or 4)
+    written = ray[:, 0].copy()
+    return HaloScan(
+        path=str(p), header=header, system_id=header.get("system id", ""), n_gates=n_gates,
+        gate_length=gate_length, gate_points=_opt_int(header.get("gate length (pts)")),
+        pulses_per_ray=_opt_int(header.get("pulses/ray")), n_rays=n, rays_per_scan=rays_per_scan,
+        scan_type=header["scan type"], focus_range=_opt_float(header.get("focus range")),
+        start_time=np.datetime64(start, "us"), resolution=_opt_float(header.get("resolution (m/s)")),
+        instrument_spectral_width=_opt_float(header.get("instrument spectral width")),
+        scan=np.arange(n) // (rays_per_scan or n), time=_ray_times(written, start),
+        decimal_hours=written, azimuth=ray[:, 1], elevation=ray[:, 2],
+        pitch=ray[:, 3] if ray.shape[1] == 5 else None, roll=ray[:, 4] if ray.shape[1] == 5 else None,
+        ranges=first + spacing * np.arange(n_gates), gate_spacing=spacing,
+        doppler=data[..., 0], intensity=data[..., 1], beta=data[..., 2],
+        spectral_width=data[..., 3] if data.shape[-1] == 4 else None)
+
+
+def _read_header(p, lines) -> tuple[dict[str, str], int]:
+    """The header's ``key: value`` fields (keys lower case) and the 0-based line of its
+    closing ``****`` (whose ``key = value``, the instrument spectral width, is kept too)."""
     header: dict[str, str] = {}
     end = None
     for i, line in enumerate(lines):
@@ -314,19 +347,23 @@ def read_hpl(path: PathLike) -> HaloScan:
     for key in _REQUIRED:
         if key not in header:
             raise file_error(p, None, f"header field {key!r} is missing: not a Halo .hpl file")
-    n_gates = _int_field(p, lines, header, "number of gates")
-    gate_length = _float_field(p, lines, header, "range gate length (m)")
-    per_scan_key = next((k for k in ("no. of rays in file", "no. of waypoints in file") if k in header), None)
-    rays_per_scan = _int_field(p, lines, header, per_scan_key) if per_scan_key else None
+    return header, end
+
+
+def _start_time(p, lines, header) -> _dt.datetime:
+    """The header's start time (``YYYYMMDD HH:MM:SS[.ss]``)."""
     try:
         text = header["start time"]
-        start = _dt.datetime.strptime(text, "%Y%m%d %H:%M:%S.%f" if "." in text else "%Y%m%d %H:%M:%S")
+        return _dt.datetime.strptime(text, "%Y%m%d %H:%M:%S.%f" if "." in text else "%Y%m%d %H:%M:%S")
     except ValueError:
         raise file_error(p, _line_of(lines, "Start time"), f"start time {header['start time']!r} is "
                          f"not 'YYYYMMDD HH:MM:SS.ss'") from None
-    first, spacing = _gate_layout(p, lines[:end], gate_length)
+
+
+def _read_rays(p, lines, end, n_gates, newline_end) -> tuple[list, list, _Cut | None]:
+    """Every complete ray after the header line `end`: ``(ray lines, gate blocks, the
+    truncation met or None)``."""
     last = max((i for i, line in enumerate(lines) if line.strip()), default=-1)
-    newline_end = text.endswith(("\n", "\r"))
     rays, gates = [], []
     ray_counts, width, cut = (3, 5), None, None
     i = end + 1
@@ -350,20 +387,26 @@ def read_hpl(path: PathLike) -> HaloScan:
         i += 1 + n_gates
     if not rays:
         raise file_error(p, end + 2, "no ray follows the header")
-    n = len(rays)
+    return rays, gates, cut
+
+
+def _warn_incomplete(p, n, rays_per_scan, per_scan_key, cut) -> None:
+    """One warning for a truncated file or rays that are not a whole number of scans."""
     partial = (f"the last scan has {n % rays_per_scan} of the header's {rays_per_scan} rays per "
                f"scan" if rays_per_scan and n % rays_per_scan else None)
     if cut is not None:
         warnings.warn(f"{p}, line {cut.line}: truncated file ({cut.message}); kept its {n} "
                       f"complete rays" + (f" ({partial})" if partial else ""), UserWarning,
-                      stacklevel=2)
+                      stacklevel=3)
     elif partial:
         warnings.warn(f"{p}: the header's {per_scan_key!r} gives {rays_per_scan} rays per scan and "
                       f"the file holds {n} rays, not a whole number of scans: all {n} kept, "
-                      f"{partial}", UserWarning, stacklevel=2)
-    ray = np.asarray(rays)
-    data = np.stack(gates)  # (r, g, 3 or 4)
-    written = ray[:, 0].copy()
+                      f"{partial}", UserWarning, stacklevel=3)
+
+
+def _ray_times(written: np.ndarray, start: _dt.datetime) -> np.ndarray:
+    """Ray times (`datetime64[us]`) from the decimal hours as written, made continuous past
+    midnight, the first ray within 12 h of the header's start time."""
     hours = written.copy()
     for k in range(1, hours.size):  # continue past midnight
         while hours[k - 1] - hours[k] > 12.0:
@@ -371,20 +414,7 @@ def read_hpl(path: PathLike) -> HaloScan:
     of_day = (start - start.replace(hour=0, minute=0, second=0, microsecond=0)).total_seconds() / 3600
     hours += 24.0 * np.round((of_day - hours[0]) / 24.0)  # the first ray within 12 h of the start
     day = np.datetime64(start.date(), "us")
-    time = day + np.round(hours * 3600e6).astype("timedelta64[us]")
-    return HaloScan(
-        path=str(p), header=header, system_id=header.get("system id", ""), n_gates=n_gates,
-        gate_length=gate_length, gate_points=_opt_int(header.get("gate length (pts)")),
-        pulses_per_ray=_opt_int(header.get("pulses/ray")), n_rays=n, rays_per_scan=rays_per_scan,
-        scan_type=header["scan type"], focus_range=_opt_float(header.get("focus range")),
-        start_time=np.datetime64(start, "us"), resolution=_opt_float(header.get("resolution (m/s)")),
-        instrument_spectral_width=_opt_float(header.get("instrument spectral width")),
-        scan=np.arange(n) // (rays_per_scan or n), time=time, decimal_hours=written,
-        azimuth=ray[:, 1], elevation=ray[:, 2],
-        pitch=ray[:, 3] if ray.shape[1] == 5 else None, roll=ray[:, 4] if ray.shape[1] == 5 else None,
-        ranges=first + spacing * np.arange(n_gates), gate_spacing=spacing,
-        doppler=data[..., 0], intensity=data[..., 1], beta=data[..., 2],
-        spectral_width=data[..., 3] if data.shape[-1] == 4 else None)
+    return day + np.round(hours * 3600e6).astype("timedelta64[us]")
 
 
 _CONTIGUOUS = "(rangegate+0.5)*gatelength"

@@ -40,6 +40,7 @@ from jaxtyping import Bool, Float, Int, Shaped
 from .._util import PathLike, file_error, freeze, import_optional, normalise_key
 from ..flags import MIN_AVAILABILITY, RecordFlag
 from ..progress import AbstractProgress
+from ._records import present_fields
 from ._windcube import header_facts, read_windcube, report, scalar_arrays, to_utc
 from .record_set import RecordSet, reader_flags
 
@@ -234,14 +235,7 @@ def read_rtd(
     facts = header_facts(parsed)
     t, k = int(keep.sum()), parsed.heights.size
     rws = parsed.quantities["rws"][keep]
-    fields = {}
-    missing = []
-    for name in ("rws_std", "cnr"):
-        if name in parsed.quantities:
-            fields[name] = freeze(parsed.quantities[name][keep])
-        else:
-            fields[name] = freeze(np.full((t, k), np.nan))
-            missing.append(name)
+    fields, missing = present_fields(parsed.quantities, ("rws_std", "cnr"), (t, k), keep)
     present = sorted({float(a) for a in position[keep] if np.isfinite(a)})
     azimuths = tuple(present) + ((float("nan"),) if vertical[keep].any() else ())
     local = parsed.time[keep]
@@ -255,7 +249,7 @@ def read_rtd(
         vertical=freeze(vertical[keep]),
         los=freeze(-rws),
         rws=freeze(rws),
-        **fields,
+        **{n_: freeze(a) for n_, a in fields.items()},
         missing=tuple(missing),
         extra={n_: freeze(a[keep]) for n_, a in parsed.extra.items()},
         scalars={n_: freeze(a[keep]) for n_, a in scalar_arrays(parsed.scalars).items()},
@@ -442,88 +436,27 @@ def group_rtd(
     Raises `ValueError` for a position that is none of the four azimuths, a bad period,
     threshold or availability.
     """
-    if not 0.0 <= tolerance_deg < 45.0:
-        raise ValueError(
-            f"tolerance_deg must be in [0, 45) so that each position matches one beam, got "
-            f"{tolerance_deg!r}"
-        )
-    if not np.isfinite(min_availability) or not 0.0 <= min_availability <= 100.0:
-        raise ValueError(f"min_availability must be a percentage in [0, 100], got "
-                         f"{min_availability!r}")
-    if min_cnr is not None:
-        threshold = float(min_cnr)
-    elif isinstance(cnr_threshold, str):
-        if cnr_threshold != "header":
-            raise ValueError(f"cnr_threshold must be a number (dB), 'header' or None, got "
-                             f"{cnr_threshold!r}")
-        threshold = float(record.cnr_threshold)
-    elif cnr_threshold is None:
-        threshold = float("nan")
-    else:
-        threshold = float(cnr_threshold)
-        if not np.isfinite(threshold):
-            raise ValueError(f"cnr_threshold must be finite (dB), got {cnr_threshold!r}")
+    threshold = _group_threshold(record, min_cnr, cnr_threshold, min_availability, tolerance_deg)
     ms = _period_ms(period)
     t_ms = record.time.astype("datetime64[ms]").astype(np.int64)
     ends = -(-t_ms // ms) * ms
     interval_ends, r_index = np.unique(ends, return_inverse=True)
     r_index = r_index.reshape(-1)
     beam = _beam_index(record, tolerance_deg)
-
-    n_r, k = interval_ends.size, record.heights.size
-    valid = np.isfinite(record.los)
-    if np.isfinite(threshold) and "cnr" not in record.missing:
-        with np.errstate(invalid="ignore"):
-            valid &= record.cnr >= threshold
-    los = np.where(valid, record.los, 0.0)
-    cnr_ok = valid & np.isfinite(record.cnr)
-    cnr = np.where(cnr_ok, record.cnr, 0.0)
-    sums = np.zeros((n_r, k, 5))
-    counts = np.zeros((n_r, k, 5), dtype=np.int64)
-    finite_counts = np.zeros((n_r, k, 5), dtype=np.int64)
-    cnr_sums = np.zeros((n_r, k, 5))
-    cnr_counts = np.zeros((n_r, k, 5), dtype=np.int64)
-    n_samples = np.zeros((n_r, 5), dtype=np.int64)
-    idx = (r_index[:, None], np.arange(k)[None, :], beam[:, None])
-    np.add.at(sums, idx, los)
-    np.add.at(counts, idx, valid.astype(np.int64))
-    np.add.at(finite_counts, idx, np.isfinite(record.los).astype(np.int64))
-    np.add.at(cnr_sums, idx, cnr)
-    np.add.at(cnr_counts, idx, cnr_ok.astype(np.int64))
-    np.add.at(n_samples, (r_index, beam), 1)
-
-    # Scan cycle: the median spacing of one beam's consecutive samples.
-    gaps = []
-    for b in range(5):
-        tb = t_ms[beam == b]
-        if tb.size > 1:
-            gaps.append(np.diff(np.sort(tb)))
-    all_gaps = np.concatenate(gaps) if gaps else np.zeros(0, np.int64)
-    all_gaps = all_gaps[all_gaps > 0]
-    if all_gaps.size:
-        cycle = int(np.median(all_gaps))
-    else:  # one sample per beam: the spacing of consecutive samples times the beam count
-        steps = np.diff(np.sort(t_ms))
-        steps = steps[steps > 0]
-        n_beams = int(np.unique(beam).size)
-        cycle = int(np.median(steps)) * n_beams if steps.size else ms
+    mean, cnr_mean, counts, finite_counts, n_samples = _beam_means(
+        record, threshold, r_index, beam, interval_ends.size)
+    cycle = _scan_cycle(t_ms, beam, ms)
     expected = max(ms / cycle, 1.0)
     in_scan = n_samples.sum(axis=0) > 0  # (b,)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
-        cnr_mean = np.where(cnr_counts > 0, cnr_sums / np.maximum(cnr_counts, 1), np.nan)
         availability = np.minimum(100.0 * counts / expected, 100.0)
     availability[:, :, ~in_scan] = np.nan
-    flags = np.zeros((n_r, k, 5), dtype=np.int32)
+    flags = np.zeros(counts.shape, dtype=np.int32)
     with np.errstate(invalid="ignore"):
         low = in_scan[None, None, :] & (availability < min_availability)
     flags[low] |= int(RecordFlag.LOW_AVAILABILITY)
     flags[(counts == 0) & (finite_counts > 0)] |= int(RecordFlag.BELOW_CNR_THRESHOLD)
-    partial = np.zeros(n_r, dtype=bool)
-    if n_r:
-        slack = 1.5 * cycle
-        partial[0] = t_ms.min() - (interval_ends[0] - ms) > slack
-        partial[-1] |= interval_ends[-1] - t_ms.max() > slack
+    partial = _partial_intervals(t_ms, interval_ends, ms, cycle)
     flags[partial] |= int(RecordFlag.PARTIAL_INTERVAL)
     mean[low] = np.nan
     return RtdBeams(
@@ -549,6 +482,94 @@ def group_rtd(
         roll=float(record.roll),
         warnings=tuple(record.warnings),
     )
+
+
+def _group_threshold(record: RtdRecord, min_cnr, cnr_threshold, min_availability,
+                     tolerance_deg) -> float:
+    """`group_rtd`'s arguments checked; the CNR threshold to apply (dB; NaN: none)."""
+    if not 0.0 <= tolerance_deg < 45.0:
+        raise ValueError(
+            f"tolerance_deg must be in [0, 45) so that each position matches one beam, got "
+            f"{tolerance_deg!r}"
+        )
+    if not np.isfinite(min_availability) or not 0.0 <= min_availability <= 100.0:
+        raise ValueError(f"min_availability must be a percentage in [0, 100], got "
+                         f"{min_availability!r}")
+    if min_cnr is not None:
+        return float(min_cnr)
+    if isinstance(cnr_threshold, str):
+        if cnr_threshold != "header":
+            raise ValueError(f"cnr_threshold must be a number (dB), 'header' or None, got "
+                             f"{cnr_threshold!r}")
+        return float(record.cnr_threshold)
+    if cnr_threshold is None:
+        return float("nan")
+    threshold = float(cnr_threshold)
+    if not np.isfinite(threshold):
+        raise ValueError(f"cnr_threshold must be finite (dB), got {cnr_threshold!r}")
+    return threshold
+
+
+def _beam_means(record: RtdRecord, threshold: float, r_index: np.ndarray, beam: np.ndarray,
+                n_r: int) -> tuple[np.ndarray, ...]:
+    """Per interval, height and beam: `(mean los, mean CNR, valid samples, finite samples)`
+    `(n_r, k, 5)` over the samples at or above `threshold`, and the samples of each beam
+    `(n_r, 5)`."""
+    k = record.heights.size
+    valid = np.isfinite(record.los)
+    if np.isfinite(threshold) and "cnr" not in record.missing:
+        with np.errstate(invalid="ignore"):
+            valid &= record.cnr >= threshold
+    los = np.where(valid, record.los, 0.0)
+    cnr_ok = valid & np.isfinite(record.cnr)
+    cnr = np.where(cnr_ok, record.cnr, 0.0)
+    sums = np.zeros((n_r, k, 5))
+    counts = np.zeros((n_r, k, 5), dtype=np.int64)
+    finite_counts = np.zeros((n_r, k, 5), dtype=np.int64)
+    cnr_sums = np.zeros((n_r, k, 5))
+    cnr_counts = np.zeros((n_r, k, 5), dtype=np.int64)
+    n_samples = np.zeros((n_r, 5), dtype=np.int64)
+    idx = (r_index[:, None], np.arange(k)[None, :], beam[:, None])
+    np.add.at(sums, idx, los)
+    np.add.at(counts, idx, valid.astype(np.int64))
+    np.add.at(finite_counts, idx, np.isfinite(record.los).astype(np.int64))
+    np.add.at(cnr_sums, idx, cnr)
+    np.add.at(cnr_counts, idx, cnr_ok.astype(np.int64))
+    np.add.at(n_samples, (r_index, beam), 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+        cnr_mean = np.where(cnr_counts > 0, cnr_sums / np.maximum(cnr_counts, 1), np.nan)
+    return mean, cnr_mean, counts, finite_counts, n_samples
+
+
+def _scan_cycle(t_ms: np.ndarray, beam: np.ndarray, ms: int) -> int:
+    """The scan cycle (ms): the median spacing of one beam's consecutive samples."""
+    gaps = []
+    for b in range(5):
+        tb = t_ms[beam == b]
+        if tb.size > 1:
+            gaps.append(np.diff(np.sort(tb)))
+    all_gaps = np.concatenate(gaps) if gaps else np.zeros(0, np.int64)
+    all_gaps = all_gaps[all_gaps > 0]
+    if all_gaps.size:
+        return int(np.median(all_gaps))
+    # one sample per beam: the spacing of consecutive samples times the beam count
+    steps = np.diff(np.sort(t_ms))
+    steps = steps[steps > 0]
+    n_beams = int(np.unique(beam).size)
+    return int(np.median(steps)) * n_beams if steps.size else ms
+
+
+def _partial_intervals(t_ms: np.ndarray, interval_ends: np.ndarray, ms: int,
+                       cycle: int) -> np.ndarray:
+    """`(r,)` True for a first or last interval the samples start or stop more than 1.5
+    scan cycles inside."""
+    partial = np.zeros(interval_ends.size, dtype=bool)
+    if interval_ends.size:
+        slack = 1.5 * cycle
+        partial[0] = t_ms.min() - (interval_ends[0] - ms) > slack
+        partial[-1] |= interval_ends[-1] - t_ms.max() > slack
+    return partial
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

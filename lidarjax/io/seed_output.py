@@ -66,6 +66,7 @@ from .._util import (
     netcdf_engine,
     require_file,
 )
+from ._common import float_row, is_number
 
 __all__ = [
     "SEED_COLUMNS",
@@ -287,7 +288,7 @@ def read_seed_output(path: PathLike) -> dict[str, Float[np.ndarray, " h"]]:
             toks = raw.split()
             if not toks:
                 continue
-            if not rows and not _numeric(toks[0]):
+            if not rows and not is_number(toks[0]):
                 if tuple(toks) == SEED_COLUMNS + ("flags",):
                     columns = SEED_COLUMNS + ("flags",)
                     continue
@@ -303,24 +304,9 @@ def read_seed_output(path: PathLike) -> dict[str, Float[np.ndarray, " h"]]:
                 raise file_error(
                     p, number, f"expected {len(columns)} numbers, found {len(toks)} fields"
                 )
-            try:
-                rows.append([float(t) for t in toks])
-            except ValueError:
-                bad = next(i for i, t in enumerate(toks) if not _numeric(t))
-                raise file_error(
-                    p, number, f"column {columns[bad]!r}: expected a number, "
-                    f"found {toks[bad]!r}"
-                ) from None
+            rows.append(float_row(toks, columns, p, number))
     table = np.array(rows, dtype=np.float64).reshape(-1, len(columns))
     return {name: table[:, i].copy() for i, name in enumerate(columns)}
-
-
-def _numeric(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 _BAD_NAME = re.compile(r"[,\[\]\r\n#]")
@@ -432,13 +418,7 @@ def read_table_csv(path: PathLike) -> CsvTable:
                     p, number, f"expected {len(names)} comma-separated values, "
                     f"found {len(fields)}"
                 )
-            try:
-                rows.append([float(f) for f in fields])
-            except ValueError:
-                bad = next(i for i, f in enumerate(fields) if not _numeric(f))
-                raise file_error(
-                    p, number, f"column {names[bad]!r}: expected a number, found {fields[bad]!r}"
-                ) from None
+            rows.append(float_row(fields, names, p, number))
     if names is None:
         raise file_error(p, None, "no header line found")
     table = np.array(rows, dtype=np.float64).reshape(-1, len(names))

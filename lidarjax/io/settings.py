@@ -53,6 +53,7 @@ import numpy as np
 from jaxtyping import Float
 
 from .._util import PathLike, atomic_write_text, file_error, format_number, freeze, require_file
+from ._common import is_number
 
 __all__ = [
     "BETA_TOLERANCE_DEG",
@@ -269,17 +270,9 @@ def read_settings(path: PathLike) -> Settings:
     message lists the betas present).
     """
     p = require_file(path, "settings file")
-    lines: list[tuple[int, list[str]]] = []
-    with open(p, encoding="utf-8", errors="replace") as fh:
-        for number, raw in enumerate(fh, start=1):
-            toks = _tokens(raw)
-            if toks:
-                lines.append((number, toks))
-    if not lines:
-        raise file_error(p, None, "empty file; expected a header line, a values line and rows")
-
+    lines = _token_lines(p)
     header_line, header = lines[0]
-    if len(header) == len(SETTINGS_HEADER) and all(_is_number(t) for t in header):
+    if len(header) == len(SETTINGS_HEADER) and all(is_number(t) for t in header):
         raise file_error(
             p,
             header_line,
@@ -288,8 +281,43 @@ def read_settings(path: PathLike) -> Settings:
         )
     if len(lines) < 2:
         raise file_error(p, None, "expected a values line after the header; the file ends")
-
     vline, values = lines[1]
+    numbers = _values_line(p, vline, values)
+    betas, locations, explicit = _location_rows(p, lines[2:], numbers, values, vline)
+    settings = Settings(
+        **numbers,
+        betas=np.asarray(betas),
+        locations=np.asarray(locations),
+        header=tuple(header),
+        source=str(p),
+        explicit_heights=None if explicit is None else np.asarray(explicit),
+    )
+    if not settings.has_location(numbers["beta"]):
+        raise file_error(
+            p,
+            vline,
+            f"no location row for the beta of this line ({values[5]} degrees); rows exist "
+            f"for betas {_format_betas(settings.betas)}",
+        )
+    return settings
+
+
+def _token_lines(p: Path) -> list[tuple[int, list[str]]]:
+    """The file's non-blank lines as `(1-based line, whitespace-separated words)`."""
+    lines: list[tuple[int, list[str]]] = []
+    with open(p, encoding="utf-8", errors="replace") as fh:
+        for number, raw in enumerate(fh, start=1):
+            toks = _tokens(raw)
+            if toks:
+                lines.append((number, toks))
+    if not lines:
+        raise file_error(p, None, "empty file; expected a header line, a values line and rows")
+    return lines
+
+
+def _values_line(p: Path, vline: int, values: list[str]) -> dict[str, int | float]:
+    """The eight numbers of the values line (`zone verbose height nh gamma beta psi
+    epsilon`), each checked."""
     if len(values) != 8:
         raise file_error(
             p,
@@ -312,30 +340,23 @@ def read_settings(path: PathLike) -> Settings:
         _number(p, vline, name, text)
         for name, text in zip(("gamma", "beta", "psi", "epsilon"), values[4:], strict=True)
     )
+    return dict(zone=zone, verbose=verbose, height=height, nh=nh, gamma=gamma, beta=beta,
+                psi=psi, epsilon=epsilon)
 
+
+def _location_rows(
+    p: Path, lines: list[tuple[int, list[str]]], numbers: dict, values: list[str], vline: int,
+) -> tuple[list[float], list[tuple[float, float, float]], list[float] | None]:
+    """`(betas, locations, explicit heights or None)` from the lines after the values line."""
     betas: list[float] = []
     locations: list[tuple[float, float, float]] = []
     row_lines: list[int] = []
     explicit: list[float] | None = None
-    for number, toks in lines[2:]:
+    for number, toks in lines:
         if toks[0].lower() == "heights":
             if explicit is not None:
                 raise file_error(p, number, "a second 'heights' line; keep one")
-            explicit = [_number(p, number, "heights", t) for t in toks[1:]]
-            if not explicit:
-                raise file_error(p, number, "'heights' needs at least one height in metres")
-            if len(explicit) > MAX_HEIGHTS:
-                raise file_error(p, number, f"{len(explicit)} heights is more than the limit "
-                                 f"of {MAX_HEIGHTS}")
-            if any(h <= 0 for h in explicit) or any(
-                    b <= a for a, b in zip(explicit, explicit[1:], strict=False)):
-                raise file_error(p, number, "heights must be > 0 m and strictly increasing")
-            if len(explicit) != nh or not math.isclose(explicit[-1], height, rel_tol=1e-9):
-                raise file_error(
-                    p, number, f"the values line says height {values[2]} and nh {values[3]}, "
-                    f"but {len(explicit)} heights up to {format_number(explicit[-1])} m are "
-                    f"listed; set height to {format_number(explicit[-1])} and nh to "
-                    f"{len(explicit)} on line {vline}")
+            explicit = _explicit_heights(p, number, toks, numbers, values, vline)
             continue
         if len(toks) != 4:
             raise file_error(p, number, f"expected 4 fields 'beta x y z', found {len(toks)}")
@@ -355,38 +376,30 @@ def read_settings(path: PathLike) -> Settings:
         row_lines.append(number)
     if not betas:
         raise file_error(p, None, "expected location rows 'beta x y z' after the values line")
+    return betas, locations, explicit
 
-    settings = Settings(
-        zone=zone,
-        verbose=verbose,
-        height=height,
-        nh=nh,
-        gamma=gamma,
-        beta=beta,
-        psi=psi,
-        epsilon=epsilon,
-        betas=np.asarray(betas),
-        locations=np.asarray(locations),
-        header=tuple(header),
-        source=str(p),
-        explicit_heights=None if explicit is None else np.asarray(explicit),
-    )
-    if not settings.has_location(beta):
+
+def _explicit_heights(
+    p: Path, number: int, toks: list[str], numbers: dict, values: list[str], vline: int,
+) -> list[float]:
+    """The metres of a `heights` line, checked against the values line's `height` and `nh`."""
+    explicit = [_number(p, number, "heights", t) for t in toks[1:]]
+    if not explicit:
+        raise file_error(p, number, "'heights' needs at least one height in metres")
+    if len(explicit) > MAX_HEIGHTS:
+        raise file_error(p, number, f"{len(explicit)} heights is more than the limit "
+                         f"of {MAX_HEIGHTS}")
+    if any(h <= 0 for h in explicit) or any(
+            b <= a for a, b in zip(explicit, explicit[1:], strict=False)):
+        raise file_error(p, number, "heights must be > 0 m and strictly increasing")
+    if len(explicit) != numbers["nh"] or not math.isclose(explicit[-1], numbers["height"],
+                                                          rel_tol=1e-9):
         raise file_error(
-            p,
-            vline,
-            f"no location row for the beta of this line ({values[5]} degrees); rows exist "
-            f"for betas {_format_betas(settings.betas)}",
-        )
-    return settings
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
+            p, number, f"the values line says height {values[2]} and nh {values[3]}, "
+            f"but {len(explicit)} heights up to {format_number(explicit[-1])} m are "
+            f"listed; set height to {format_number(explicit[-1])} and nh to "
+            f"{len(explicit)} on line {vline}")
+    return explicit
 
 
 def write_settings(path: PathLike, settings: Settings) -> Path:

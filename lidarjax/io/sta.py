@@ -33,15 +33,8 @@ from ..flags import BLOCKING_FLAGS, MIN_AVAILABILITY, RecordFlag
 from ..progress import AbstractProgress
 from ..scan import Scan
 from ..series import SeriesStatistics
-from ._windcube import (
-    header_facts,
-    infer_bad_times,
-    read_windcube,
-    regular_step,
-    report,
-    scalar_arrays,
-    to_utc,
-)
+from ._records import duplicate_times, infer_bad_times, present_fields, regular_step, row_flags
+from ._windcube import header_facts, read_windcube, report, scalar_arrays, to_utc
 from .record_set import DIRECTION_STD_KEYS, RecordSet, extra_column
 
 __all__ = ["STA_FIELDS", "STA_GATE_QUANTITIES", "STA_QUANTITIES", "StaRecord", "read_sta",
@@ -322,38 +315,13 @@ def read_sta(
         messages.append(f"{p}, line {parsed.row_lines[i]}: left out: its time stamp is "
                         "unreadable and the neighbouring rows are not regular enough to infer it")
     t, k = int(keep.sum()), parsed.heights.size
-    flags = np.zeros((t, k), dtype=np.int32)
-    row_ok = parsed.row_ok[keep]
-    flags[~row_ok] |= int(RecordFlag.CORRUPT_ROW)
-    flags[inferred[keep]] |= int(RecordFlag.TIME_INFERRED)
-    fields: dict[str, np.ndarray] = {}
-    missing = []
-    for name in STA_FIELDS:
-        if name in parsed.quantities:
-            fields[name] = parsed.quantities[name][keep].copy()
-        else:
-            fields[name] = np.full((t, k), np.nan)
-            missing.append(name)
+    fields, missing = present_fields(parsed.quantities, STA_FIELDS, (t, k), keep)
     z_wind = fields["w"].copy()
     fields["w"] = -fields["w"]  # file: positive down (towards the lidar); lidarjax: up
-    with np.errstate(invalid="ignore"):
-        impossible = (
-            (fields["speed"] < 0) | (fields["speed_min"] < 0) | (fields["speed_std"] < 0)
-            | (fields["direction"] < 0) | (fields["direction"] > 360)
-            | (fields["availability"] < 0) | (fields["availability"] > 100)
-        )
-        high_cnr = fields["cnr"] > 0
-        low = fields["availability"] < min_availability
-    flags[impossible] |= int(RecordFlag.IMPOSSIBLE_VALUE)
-    flags[low] |= int(RecordFlag.LOW_AVAILABILITY)
-    flags[high_cnr] |= int(RecordFlag.HIGH_CNR)
     times = t_local[keep]
-    dup = np.zeros(t, dtype=bool)
-    if t > 1:
-        order = np.argsort(times, kind="stable")
-        same = times[order][1:] == times[order][:-1]
-        dup[order[1:][same]] = True
-    flags[dup] |= int(RecordFlag.DUPLICATE_TIME)
+    flags = row_flags(parsed.row_ok, inferred, keep, k)
+    impossible = _flag_values(fields, flags, min_availability)
+    flags[duplicate_times(times)] |= int(RecordFlag.DUPLICATE_TIME)
     bad = (flags & int(RecordFlag.CORRUPT_ROW | RecordFlag.IMPOSSIBLE_VALUE
                        | RecordFlag.LOW_AVAILABILITY)) != 0
     for name in _WIND_FIELDS:
@@ -386,6 +354,26 @@ def read_sta(
         warnings=tuple(messages),
         min_availability=float(min_availability),
     )
+
+
+def _flag_values(fields: dict[str, np.ndarray], flags: np.ndarray,
+                 min_availability: float) -> np.ndarray:
+    """Flag (in `flags`) impossible values (`IMPOSSIBLE_VALUE`: negative speed, dispersion or
+    availability, direction outside [0, 360], availability above 100 %), availability below
+    `min_availability` percent (`LOW_AVAILABILITY`) and CNR above 0 dB (`HIGH_CNR`); returns
+    the impossible ones `(t, k)`."""
+    with np.errstate(invalid="ignore"):
+        impossible = (
+            (fields["speed"] < 0) | (fields["speed_min"] < 0) | (fields["speed_std"] < 0)
+            | (fields["direction"] < 0) | (fields["direction"] > 360)
+            | (fields["availability"] < 0) | (fields["availability"] > 100)
+        )
+        high_cnr = fields["cnr"] > 0
+        low = fields["availability"] < min_availability
+    flags[impossible] |= int(RecordFlag.IMPOSSIBLE_VALUE)
+    flags[low] |= int(RecordFlag.LOW_AVAILABILITY)
+    flags[high_cnr] |= int(RecordFlag.HIGH_CNR)
+    return impossible
 
 
 def write_sta(

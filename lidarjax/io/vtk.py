@@ -301,14 +301,7 @@ def _face_centre_normal(points: np.ndarray, pad: np.ndarray, faces: np.ndarray, 
             ids = pad[j, faces[rows]]
         pj = np.stack([xyz[a][ids] for a in range(3)])
         cols.append((mask, rows, pj))
-        if j == 0:
-            acc[:] = pj
-        elif rows is not None:
-            acc[:, rows] += pj
-        elif mask is None:
-            acc += pj
-        else:
-            np.add(acc, pj, out=acc, where=mask)
+        _add_column(acc, j, mask, rows, pj)
     fc = acc / nv
     d = [pj - (fc if rows is None else fc[:, rows]) for _, rows, pj in cols]
     normal = np.zeros((3, n))
@@ -328,15 +321,22 @@ def _face_centre_normal(points: np.ndarray, pad: np.ndarray, faces: np.ndarray, 
                 nxt[:, nv[rows] > j + 1] = d[j + 1]
         a, b = d[j], nxt
         term = np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-        if j == 0:
-            normal[:] = term
-        elif rows is not None:
-            normal[:, rows] += term
-        elif mask is None:
-            normal += term
-        else:
-            np.add(normal, term, out=normal, where=mask)
+        _add_column(normal, j, mask, rows, term)
     return fc.T, normal.T
+
+
+def _add_column(acc: np.ndarray, j: int, mask: np.ndarray | None, rows: np.ndarray | None,
+                value: np.ndarray) -> None:
+    """`acc (3, n) += value` over the faces vertex column `j` covers (`rows` when sparse,
+    else every face or those of `mask`); column 0 sets `acc`."""
+    if j == 0:
+        acc[:] = value
+    elif rows is not None:
+        acc[:, rows] += value
+    elif mask is None:
+        acc += value
+    else:
+        np.add(acc, value, out=acc, where=mask)
 
 
 def _poly_mesh(points: np.ndarray, pad, cell_of, sizes, n_cells, path: Path) -> PolyMesh:

@@ -42,10 +42,18 @@ from typing import Any
 import numpy as np
 from jaxtyping import Float, Shaped
 
-from .._util import PathLike, file_error, freeze, import_optional, normalise_key, require_file, summarise_lines
+from .._util import PathLike, file_error, freeze, import_optional, normalise_key, require_file
 from ..flags import BLOCKING_FLAGS, MIN_AVAILABILITY, RecordFlag
 from ._common import offset_timedelta, parse_times, parse_utc_offset, read_text
-from ._windcube import infer_bad_times, regular_step
+from ._records import (
+    duplicate_times,
+    infer_bad_times,
+    per_height_arrays,
+    present_fields,
+    regular_step,
+    row_flags,
+    warn_corrupt_rows,
+)
 from .record_set import DIRECTION_STD_KEYS, RecordSet, extra_column, reader_flags
 
 __all__ = ["ZEPHIR_MISSING", "ZephirRecord", "read_zephir_csv"]
@@ -290,17 +298,82 @@ def read_zephir_csv(
     the file, the line and the fix for: an empty, binary or UTF-16 file, no header line
     with a time column, no per-height columns, or a bad override.
     """
+    _check_overrides(time_convention, utc_offset_hours)
+    p = require_file(path, "ZephIR CSV file")
+    lines = read_text(p).splitlines()
+    if re.match(r"^\s*(HeaderSize|HeaderLength)\s*=", lines[0].lstrip("\ufeff"), re.IGNORECASE):
+        raise file_error(p, 1, "this is a Windcube file (HeaderSize=/HeaderLength=), not a "
+                         "ZephIR CSV export; read it with read_sta or read_rtd")
+    preamble, header, header_line, delimiter, decimal = _find_header(p, lines)
+    time_col, second_col, per_height, scalar_cols, notes = _map_columns(p, header, header_line)
+    convention, zone, offset, period_s, notes = _time_conventions(
+        p, preamble, header[time_col], notes, time_convention, utc_offset_hours)
+    heights = np.array(sorted({h for _, h, _ in per_height}), dtype=np.float64)
+    cells_list, row_lines, local, time_ok, values, row_ok, problems = _read_rows(
+        lines[header_line:], header_line, header, delimiter, decimal, time_col, second_col,
+        per_height)
+    step = regular_step(local, time_ok)
+    local, inferred, keep = infer_bad_times(local, time_ok, step)
+    if period_s is None:
+        period = step if step is not None else np.timedelta64(600_000, "ms")
+    else:
+        period = np.timedelta64(int(round(period_s * 1000)), "ms")
+    t, k = int(keep.sum()), heights.size
+    quantities, extra = per_height_arrays(per_height, values[keep], heights,
+                                          ZEPHIR_QUANTITIES.get)
+    fields, missing = present_fields(quantities, ZEPHIR_FIELDS, (t, k))
+    flags = row_flags(row_ok, inferred, keep, k)
+    with np.errstate(invalid="ignore"):
+        impossible = ((fields["speed"] < 0) | (fields["direction"] < 0)
+                      | (fields["direction"] > 360))
+    flags[impossible] |= int(RecordFlag.IMPOSSIBLE_VALUE)
+    for name in ZEPHIR_FIELDS:
+        fields[name][impossible] = np.nan
+    local = local[keep]
+    flags[duplicate_times(local)] |= int(RecordFlag.DUPLICATE_TIME)
+    utc_end = local - offset_timedelta(offset)
+    if convention == "start":
+        utc_end = utc_end + period
+    messages = warn_corrupt_rows(p, problems, "record", stacklevel=2)
+    for note in notes:
+        if "same quantity" in note:
+            warnings.warn(note, stacklevel=2)
+    return ZephirRecord(
+        path=str(p),
+        delimiter=delimiter,
+        decimal=decimal,
+        preamble=tuple(preamble),
+        time=freeze(utc_end.astype("datetime64[s]")),
+        heights=freeze(heights),
+        **{n_: freeze(a) for n_, a in fields.items()},
+        missing=tuple(missing),
+        extra={n_: freeze(a) for n_, a in extra.items()},
+        scalars=_scalar_columns(header, scalar_cols, cells_list, keep, decimal),
+        model=_model(preamble),
+        time_convention=convention,
+        timezone=zone,
+        utc_offset_hours=float(offset),
+        time_local=freeze(local.astype("datetime64[s]")),
+        period=period.astype("timedelta64[s]"),
+        flags=freeze(flags),
+        row_lines=freeze(row_lines[keep]),
+        warnings=tuple(messages + notes),
+    )
+
+
+def _check_overrides(time_convention: str | None, utc_offset_hours: float | None) -> None:
     if time_convention not in (None, "start", "end"):
         raise ValueError(f"time_convention must be 'start' or 'end', got {time_convention!r}")
     if utc_offset_hours is not None and not (np.isfinite(utc_offset_hours)
                                              and abs(utc_offset_hours) <= 14):
         raise ValueError(f"utc_offset_hours must be finite and within +-14 h, got "
                          f"{utc_offset_hours!r}")
-    p = require_file(path, "ZephIR CSV file")
-    lines = read_text(p).splitlines()
-    if re.match(r"^\s*(HeaderSize|HeaderLength)\s*=", lines[0].lstrip("\ufeff"), re.IGNORECASE):
-        raise file_error(p, 1, "this is a Windcube file (HeaderSize=/HeaderLength=), not a "
-                         "ZephIR CSV export; read it with read_sta or read_rtd")
+
+
+def _find_header(p, lines: list[str]):
+    """`(preamble lines, header cells, its 1-based line, delimiter, decimal)`: the first line
+    (of 200) naming a time column and a per-height column, else the first naming a time
+    column."""
     preamble: list[str] = []
     header: list[str] | None = None
     delimiter, decimal = ",", "."
@@ -325,6 +398,12 @@ def read_zephir_csv(
             p, None, "no header line naming a time column ('Time and Date' or "
             "'Timestamp') in the first 200 lines; is this a ZephIR 10-minute CSV export?"
         )
+    return preamble, header, header_line, delimiter, decimal
+
+
+def _map_columns(p, header: list[str], header_line: int):
+    """`(time column, separate 'Time' column or None, per-height columns as (column, height,
+    quantity key), other columns, notes)`."""
     keys = [_plain(c) for c in header]
     time_col = next(i for name in _TIME_NAMES for i, key in enumerate(keys) if key == name)
     second_col = None  # a separate 'Time' column beside 'Date'
@@ -353,25 +432,39 @@ def read_zephir_csv(
             p, header_line, "no per-height columns such as 'Horizontal Wind Speed (m/s) "
             "at 38m'"
         )
-    convention, zone, offset, period_s, conv_notes = _conventions(
-        [*preamble, header[time_col]], p)
-    notes += conv_notes
+    return time_col, second_col, per_height, scalar_cols, notes
+
+
+def _time_conventions(p, preamble, time_name, notes, time_convention, utc_offset_hours):
+    """`(convention, zone text, offset hours, period seconds or None, notes)` read from the
+    preamble and the time column's name (`_conventions`), the overrides applied."""
+    convention, zone, offset, period_s, conv_notes = _conventions([*preamble, time_name], p)
+    notes = notes + conv_notes
     if time_convention is not None:
         convention = time_convention
     if utc_offset_hours is not None:
         offset, zone = float(utc_offset_hours), f"UTC{utc_offset_hours:+g} (given)"
         notes = [n for n in notes if "no time zone" not in n]
-    model = ""
+    return convention, zone, offset, period_s, notes
+
+
+def _model(preamble: list[str]) -> str:
+    """`"zx"`, `"zephir_300"` or `""`, from the preamble."""
     pre = "\n".join(preamble).lower()
     if "zx" in pre:
-        model = "zx"
-    elif "zephir" in pre or "z300" in pre:
-        model = "zephir_300"
+        return "zx"
+    if "zephir" in pre or "z300" in pre:
+        return "zephir_300"
+    return ""
 
-    heights = np.array(sorted({h for _, h, _ in per_height}), dtype=np.float64)
-    body = [(n, ln) for n, ln in enumerate(lines[header_line:], start=header_line + 1)
+
+def _read_rows(body_lines, header_line, header, delimiter, decimal, time_col, second_col,
+               per_height):
+    """The data rows (blank ones skipped): `(cells, 1-based lines, local times, time_ok,
+    per-height values, row_ok, problems)`; a bad row's values are NaN and `problems` says
+    why."""
+    body = [(n, ln) for n, ln in enumerate(body_lines, start=header_line + 1)
             if ln.strip(" \t,;")]
-    n = len(body)
     cells_list = list(csv.reader([ln for _, ln in body], delimiter=delimiter))
     row_lines = np.array([ln for ln, _ in body], dtype=np.int64)
     stamps = []
@@ -381,11 +474,10 @@ def read_zephir_csv(
             stamp = f"{stamp} {cells[second_col]}"
         stamps.append(stamp)
     local, time_ok = parse_times(stamps)
-    values = np.full((n, len(per_height)), np.nan)
+    values = np.full((len(body), len(per_height)), np.nan)
     row_ok = time_ok.copy()
     problems: list[tuple[int, str]] = []
     for r, cells in enumerate(cells_list):
-        why = None
         if len(cells) < len(header):
             why = f"expected {len(header)} fields separated by {delimiter!r}, found {len(cells)}"
         elif len(cells) > len(header) and any(c.strip() for c in cells[len(header):]):
@@ -393,75 +485,32 @@ def read_zephir_csv(
         elif not time_ok[r]:
             why = f"unreadable time stamp {stamps[r].strip()[:40]!r}"
         else:
-            for c, (i, _, _) in enumerate(per_height):
-                try:
-                    values[r, c] = _value(cells[i], decimal)
-                except ValueError:
-                    try:  # a ';' file written with decimal points still parses
-                        values[r, c] = _value(cells[i], ".")
-                    except ValueError:
-                        why = (f"column {header[i]!r}: expected a number, found "
-                               f"{cells[i].strip()[:30]!r}")
-                        break
+            why = _row_values(values[r], cells, header, per_height, decimal)
         if why is not None:
             row_ok[r] = False
             values[r] = np.nan
             problems.append((int(row_lines[r]), why))
+    return cells_list, row_lines, local, time_ok, values, row_ok, problems
 
-    step = regular_step(local, time_ok)
-    local, inferred, keep = infer_bad_times(local, time_ok, step)
-    if period_s is None:
-        period = step if step is not None else np.timedelta64(600_000, "ms")
-    else:
-        period = np.timedelta64(int(round(period_s * 1000)), "ms")
-    t, k = int(keep.sum()), heights.size
-    values = values[keep]
-    index = {h: j for j, h in enumerate(heights.tolist())}
-    quantities: dict[str, np.ndarray] = {}
-    extra: dict[str, np.ndarray] = {}
-    for c, (_, h, key) in enumerate(per_height):
-        field = ZEPHIR_QUANTITIES.get(key)
-        target, name = (quantities, field) if field else (extra, key)
-        if name not in target:
-            target[name] = np.full((t, k), np.nan)
-        target[name][:, index[h]] = values[:, c]
-    fields = {}
-    missing = []
-    for name in ZEPHIR_FIELDS:
-        if name in quantities:
-            fields[name] = quantities[name]
-        else:
-            fields[name] = np.full((t, k), np.nan)
-            missing.append(name)
-    flags = np.zeros((t, k), dtype=np.int32)
-    flags[~row_ok[keep]] |= int(RecordFlag.CORRUPT_ROW)
-    flags[inferred[keep]] |= int(RecordFlag.TIME_INFERRED)
-    with np.errstate(invalid="ignore"):
-        impossible = ((fields["speed"] < 0) | (fields["direction"] < 0)
-                      | (fields["direction"] > 360))
-    flags[impossible] |= int(RecordFlag.IMPOSSIBLE_VALUE)
-    for name in ZEPHIR_FIELDS:
-        fields[name][impossible] = np.nan
-    local = local[keep]
-    if t > 1:
-        order = np.argsort(local, kind="stable")
-        same = local[order][1:] == local[order][:-1]
-        flags[order[1:][same]] |= int(RecordFlag.DUPLICATE_TIME)
-    utc_end = local - offset_timedelta(offset)
-    if convention == "start":
-        utc_end = utc_end + period
-    messages = [f"{p}, line {ln}: {why}; read as a flagged missing record"
-                for ln, why in problems]
-    if problems:
-        warnings.warn(
-            f"{p}: {len(problems)} corrupt row(s) at line(s) "
-            f"{summarise_lines([ln for ln, _ in problems])} read as flagged missing records "
-            f"(first: line {problems[0][0]}: {problems[0][1]}); every other row was read",
-            stacklevel=2,
-        )
-    for note in notes:
-        if "same quantity" in note:
-            warnings.warn(note, stacklevel=2)
+
+def _row_values(out: np.ndarray, cells: list[str], header: list[str], per_height,
+                decimal: str) -> str | None:
+    """Fill `out` with the row's per-height values; None, or why a cell is not a number."""
+    for c, (i, _, _) in enumerate(per_height):
+        try:
+            out[c] = _value(cells[i], decimal)
+        except ValueError:
+            try:  # a ';' file written with decimal points still parses
+                out[c] = _value(cells[i], ".")
+            except ValueError:
+                return (f"column {header[i]!r}: expected a number, found "
+                        f"{cells[i].strip()[:30]!r}")
+    return None
+
+
+def _scalar_columns(header, scalar_cols, cells_list, keep, decimal) -> dict[str, np.ndarray]:
+    """The other columns of the rows kept: float64 (9998/9999 -> NaN), or text when not
+    numeric; a repeated name gets `#2`."""
     scalars: dict[str, np.ndarray] = {}
     for col in scalar_cols:
         vals = [cells[col] if len(cells) > col else "" for cells, kk in zip(
@@ -474,24 +523,4 @@ def read_zephir_csv(
         while name in scalars:
             name += "#2"
         scalars[name] = freeze(arr)
-    return ZephirRecord(
-        path=str(p),
-        delimiter=delimiter,
-        decimal=decimal,
-        preamble=tuple(preamble),
-        time=freeze(utc_end.astype("datetime64[s]")),
-        heights=freeze(heights),
-        **{n_: freeze(a) for n_, a in fields.items()},
-        missing=tuple(missing),
-        extra={n_: freeze(a) for n_, a in extra.items()},
-        scalars=scalars,
-        model=model,
-        time_convention=convention,
-        timezone=zone,
-        utc_offset_hours=float(offset),
-        time_local=freeze(local.astype("datetime64[s]")),
-        period=period.astype("timedelta64[s]"),
-        flags=freeze(flags),
-        row_lines=freeze(row_lines[keep]),
-        warnings=tuple(messages + notes),
-    )
+    return scalars
