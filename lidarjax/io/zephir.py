@@ -322,15 +322,8 @@ def read_zephir_csv(
     quantities, extra = per_height_arrays(per_height, values[keep], heights,
                                           ZEPHIR_QUANTITIES.get)
     fields, missing = present_fields(quantities, ZEPHIR_FIELDS, (t, k))
-    flags = row_flags(row_ok, inferred, keep, k)
-    with np.errstate(invalid="ignore"):
-        impossible = ((fields["speed"] < 0) | (fields["direction"] < 0)
-                      | (fields["direction"] > 360))
-    flags[impossible] |= int(RecordFlag.IMPOSSIBLE_VALUE)
-    for name in ZEPHIR_FIELDS:
-        fields[name][impossible] = np.nan
     local = local[keep]
-    flags[duplicate_times(local)] |= int(RecordFlag.DUPLICATE_TIME)
+    flags = _flag_values(fields, row_flags(row_ok, inferred, keep, k), local)
     utc_end = local - offset_timedelta(offset)
     if convention == "start":
         utc_end = utc_end + period
@@ -359,6 +352,20 @@ def read_zephir_csv(
         row_lines=freeze(row_lines[keep]),
         warnings=tuple(messages + notes),
     )
+
+
+def _flag_values(fields: dict[str, np.ndarray], flags: np.ndarray,
+                 local: np.ndarray) -> np.ndarray:
+    """`flags` with `IMPOSSIBLE_VALUE` where a speed is negative or a direction outside
+    [0, 360] (those values set NaN in `fields`) and `DUPLICATE_TIME` on a repeated stamp."""
+    with np.errstate(invalid="ignore"):
+        impossible = ((fields["speed"] < 0) | (fields["direction"] < 0)
+                      | (fields["direction"] > 360))
+    flags[impossible] |= int(RecordFlag.IMPOSSIBLE_VALUE)
+    for name in ZEPHIR_FIELDS:
+        fields[name][impossible] = np.nan
+    flags[duplicate_times(local)] |= int(RecordFlag.DUPLICATE_TIME)
+    return flags
 
 
 def _check_overrides(time_convention: str | None, utc_offset_hours: float | None) -> None:
