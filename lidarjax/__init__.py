@@ -189,6 +189,7 @@ from .turbulence import synthesize_box as synthesize_box
 from .workflows.demo import run_demo as run_demo
 from .workflows.farm_study import FARM_SCANS as FARM_SCANS
 from .workflows.farm_study import FarmStudy as FarmStudy
+from .workflows.farm_study import FarmStudyConfig as FarmStudyConfig
 from .workflows.farm_study import check_lidar_position as check_lidar_position
 from .workflows.farm_study import farm_monitor_points as farm_monitor_points
 from .workflows.farm_study import farm_study as farm_study

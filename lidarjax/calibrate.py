@@ -404,6 +404,99 @@ def _start(model: _CalibrationModel, problems: _Problems, with_ref: bool):
     return jnp.stack([-u0 * jnp.sin(d0), -u0 * jnp.cos(d0)], -1)
 
 
+def _reduced_pieces(model: _CalibrationModel, problems: _Problems, freef, nuisance, theta):
+    """Each problem's residuals and its Schur-complement pieces at ``(nuisance, theta)``: the
+    reduced matrix `h_i` and gradient `s_i` over the offsets, the nuisance block's inverse
+    `ainv`, its gradient `gn`, the cross block `c` and whether the block is well posed."""
+    dtype = problems.los.dtype
+    w = problems.weights
+    los, jn, jt = _model_and_jacobian(model, nuisance, theta, problems.ref_dir,
+                                      problems.height)
+    resid = problems.los - los
+    jt = jt * freef
+    a = jnp.einsum("nb,nbi,nbj->nij", w, jn, jn, precision=HIGHEST)
+    gn = jnp.einsum("nb,nbi,nb->ni", w, jn, resid, precision=HIGHEST)
+    c = jnp.einsum("nb,nbi,nbj->nij", w, jn, jt, precision=HIGHEST)
+    ainv, ok = _small_inv(a)
+    okf = ok.astype(dtype)
+    tt = jnp.einsum("nb,nbi,nbj->nij", w, jt, jt, precision=HIGHEST)
+    gt = jnp.einsum("nb,nbi,nb->ni", w, jt, resid, precision=HIGHEST)
+    ca = jnp.einsum("nki,nkl->nil", c, ainv, precision=HIGHEST)  # C^T A^-1 (n, 3, m)
+    h_i = (tt - jnp.einsum("nil,nlj->nij", ca, c, precision=HIGHEST)) * okf[:, None, None]
+    s_i = (gt - jnp.einsum("nil,nl->ni", ca, gn, precision=HIGHEST)) * okf[:, None]
+    return resid, h_i, s_i, ainv, gn, c, ok
+
+
+def _evaluate(model, problems, freef, n_records, nuisance, theta, it):
+    """The statistics at a point (`_Solution`) and what its step needs."""
+    w = problems.weights
+    resid, h_i, s_i, ainv, gn, c, ok = _reduced_pieces(model, problems, freef, nuisance, theta)
+    hmat = jnp.sum(h_i, 0)
+    # the sandwich's meat: per record, the sum of its problems' reduced gradients
+    s_rec = jax.ops.segment_sum(s_i, problems.record, num_segments=n_records)
+    sol = _Solution(
+        theta=theta, hessian=hmat,
+        meat=jnp.einsum("ri,rj->ij", s_rec, s_rec, precision=HIGHEST),
+        wrss=jnp.sum(w * resid * resid * ok[:, None]),
+        n_obs=jnp.sum((w > 0) & ok[:, None]), n_ok=jnp.sum(ok),
+        n_used=jnp.sum(jnp.any(w > 0, -1) & ok),
+        n_records=jnp.sum(jax.ops.segment_max(jnp.any(w > 0, -1), problems.record,
+                                              num_segments=n_records)),
+        num_steps=it, last_step=jnp.zeros((), problems.los.dtype),
+        converged=jnp.asarray(False))
+    return sol, (jnp.sum(s_i, 0), ainv, gn, c, ok)
+
+
+def _offset_step(sol, g, theta, freef, weakf, anchor):
+    """The Gauss--Newton step of the offsets from the reduced system (the weak offsets held
+    near `anchor` by the ridge), clipped to the trust region, with the ridge and how far
+    the step moves the reported offsets (in units of the larger of `TOLERANCE` and
+    `STEP_SHARE` standard errors, and in degrees)."""
+    dtype = theta.dtype
+    hmat = sol.hessian
+    ridge = weakf * (RIDGE * jnp.max(jnp.diagonal(hmat) * freef))
+    hm = (hmat * freef[:, None] * freef[None, :] + jnp.eye(3, dtype=dtype) * (1.0 - freef)[:, None]
+          + jnp.diag(ridge))
+    g = g - ridge * (theta - anchor)
+    # a trust region: at most 5 degrees of north offset and 1 degree of tilt per pass
+    limit = jnp.asarray(_MAX_STEP, dtype)
+    dtheta = jnp.clip(jnp.linalg.solve(hm, g * freef), -limit, limit)
+    # convergence is judged on the offsets reported: a nuisance offset (epsilon without
+    # a reference) that the records hardly tell creeps on for passes while moving the
+    # reported ones by far less than their rounding
+    sd = jnp.sqrt(sol.wrss / jnp.maximum(sol.n_obs, 1)
+                  * jnp.abs(jnp.diagonal(jnp.linalg.inv(hm))))
+    scale = jnp.maximum(STEP_SHARE * jnp.where(jnp.isfinite(sd), sd, 0.0), TOLERANCE)
+    moved = jnp.max(jnp.abs(dtheta) / scale * freef * (1.0 - weakf))
+    moved_deg = jnp.max(jnp.abs(dtheta) * freef * (1.0 - weakf))
+    return dtheta, ridge, (moved, moved_deg)
+
+
+def _solve_pass(model, problems, freef, weakf, anchor, n_records, carry):
+    """One pass: the statistics of the point it is at, then the step (halved back towards
+    the last point accepted when it made the objective worse)."""
+    it, nuisance, theta, _, sol_kept, kept = carry
+    nuis_k, theta_k, wrss_k = kept  # the last point accepted
+    sol, (g, ainv, gn, c, ok) = _evaluate(model, problems, freef, n_records, nuisance, theta,
+                                          it)
+    dtheta, ridge, moved = _offset_step(sol, g, theta, freef, weakf, anchor)
+    dnuis = jnp.einsum("nij,nj->ni", ainv, gn - jnp.einsum("nij,j->ni", c, dtheta))
+    dnuis = jnp.where(ok[:, None], dnuis, 0.0)
+    # a step that made the objective (with the nuisance offset's ridge) worse is halved
+    # back towards the last point accepted: a nuisance offset the records hardly tell
+    # can make the Gauss--Newton steps overshoot and cycle
+    penalty = lambda th: jnp.sum(ridge * (th - anchor) ** 2)  # noqa: E731
+    obj, obj_k = sol.wrss + penalty(theta), wrss_k + penalty(theta_k)
+    worse = (it > 0) & (obj > obj_k + 1e-10 * jnp.abs(obj_k))
+    pick = lambda bad, good: jax.tree_util.tree_map(  # noqa: E731
+        lambda x, y: jnp.where(worse, x, y), bad, good)
+    inf = jnp.asarray(jnp.inf, theta.dtype)
+    nxt_nuis, nxt_theta, last, sol_out, kept_out = pick(
+        (0.5 * (nuis_k + nuisance), 0.5 * (theta_k + theta), (inf, inf), sol_kept, kept),
+        (nuisance + dnuis, theta + dtheta, moved, sol, (nuisance, theta, sol.wrss)))
+    return it + 1, nxt_nuis, nxt_theta, last, sol_out, kept_out
+
+
 @eqx.filter_jit
 def _solve(model: _CalibrationModel, problems: _Problems, free, weak, anchor, theta0,
            max_passes, n_records, with_ref):
@@ -414,85 +507,11 @@ def _solve(model: _CalibrationModel, problems: _Problems, free, weak, anchor, th
     ridge of `RIDGE` times the largest diagonal of the reduced matrix where the records
     cannot tell them. The offsets start at `theta0` ``(3,)`` degrees."""
     dtype = problems.los.dtype
-    w = problems.weights
     freef = free.astype(dtype)
     weakf = weak.astype(dtype)
 
-    def pieces(nuisance, theta):
-        los, jn, jt = _model_and_jacobian(model, nuisance, theta, problems.ref_dir,
-                                          problems.height)
-        resid = problems.los - los
-        jt = jt * freef
-        a = jnp.einsum("nb,nbi,nbj->nij", w, jn, jn, precision=HIGHEST)
-        gn = jnp.einsum("nb,nbi,nb->ni", w, jn, resid, precision=HIGHEST)
-        c = jnp.einsum("nb,nbi,nbj->nij", w, jn, jt, precision=HIGHEST)
-        ainv, ok = _small_inv(a)
-        okf = ok.astype(dtype)
-        tt = jnp.einsum("nb,nbi,nbj->nij", w, jt, jt, precision=HIGHEST)
-        gt = jnp.einsum("nb,nbi,nb->ni", w, jt, resid, precision=HIGHEST)
-        ca = jnp.einsum("nki,nkl->nil", c, ainv, precision=HIGHEST)  # C^T A^-1 (n, 3, m)
-        h_i = (tt - jnp.einsum("nil,nlj->nij", ca, c, precision=HIGHEST)) * okf[:, None, None]
-        s_i = (gt - jnp.einsum("nil,nl->ni", ca, gn, precision=HIGHEST)) * okf[:, None]
-        return resid, h_i, s_i, ainv, gn, c, ok
-
-    eye = jnp.eye(3, dtype=dtype)
-    limit = jnp.asarray(_MAX_STEP, dtype)
-    zero = jnp.zeros((), dtype)
-
-    def evaluate(nuisance, theta, it):
-        """The statistics at a point (`_Solution`) and what its step needs."""
-        resid, h_i, s_i, ainv, gn, c, ok = pieces(nuisance, theta)
-        hmat = jnp.sum(h_i, 0)
-        # the sandwich's meat: per record, the sum of its problems' reduced gradients
-        s_rec = jax.ops.segment_sum(s_i, problems.record, num_segments=n_records)
-        sol = _Solution(
-            theta=theta, hessian=hmat,
-            meat=jnp.einsum("ri,rj->ij", s_rec, s_rec, precision=HIGHEST),
-            wrss=jnp.sum(w * resid * resid * ok[:, None]),
-            n_obs=jnp.sum((w > 0) & ok[:, None]), n_ok=jnp.sum(ok),
-            n_used=jnp.sum(jnp.any(w > 0, -1) & ok),
-            n_records=jnp.sum(jax.ops.segment_max(jnp.any(w > 0, -1), problems.record,
-                                                  num_segments=n_records)),
-            num_steps=it, last_step=zero, converged=jnp.asarray(False))
-        return sol, (jnp.sum(s_i, 0), ainv, gn, c, ok)
-
     def step(carry):
-        # one evaluation per pass: the statistics of the point it is at, then the step
-        it, nuisance, theta, _, sol_kept, kept = carry
-        nuis_k, theta_k, wrss_k = kept  # the last point accepted
-        sol, (g, ainv, gn, c, ok) = evaluate(nuisance, theta, it)
-        hmat = sol.hessian
-        ridge = weakf * (RIDGE * jnp.max(jnp.diagonal(hmat) * freef))
-        hm = (hmat * freef[:, None] * freef[None, :] + eye * (1.0 - freef)[:, None]
-              + jnp.diag(ridge))
-        g = g - ridge * (theta - anchor)
-        # a trust region: at most 5 degrees of north offset and 1 degree of tilt per pass
-        dtheta = jnp.clip(jnp.linalg.solve(hm, g * freef), -limit, limit)
-        dnuis = jnp.einsum("nij,nj->ni", ainv, gn - jnp.einsum("nij,j->ni", c, dtheta))
-        dnuis = jnp.where(ok[:, None], dnuis, 0.0)
-        # convergence is judged on the offsets reported: a nuisance offset (epsilon without
-        # a reference) that the records hardly tell creeps on for passes while moving the
-        # reported ones by far less than their rounding
-        # (in units of the larger of `TOLERANCE` and `STEP_SHARE` standard errors)
-        sd = jnp.sqrt(sol.wrss / jnp.maximum(sol.n_obs, 1)
-                      * jnp.abs(jnp.diagonal(jnp.linalg.inv(hm))))
-        scale = jnp.maximum(STEP_SHARE * jnp.where(jnp.isfinite(sd), sd, 0.0), TOLERANCE)
-        moved = jnp.max(jnp.abs(dtheta) / scale * freef * (1.0 - weakf))
-        moved_deg = jnp.max(jnp.abs(dtheta) * freef * (1.0 - weakf))
-        # a step that made the objective (with the nuisance offset's ridge) worse is halved
-        # back towards the last point accepted: a nuisance offset the records hardly tell
-        # can make the Gauss--Newton steps overshoot and cycle
-        penalty = lambda th: jnp.sum(ridge * (th - anchor) ** 2)  # noqa: E731
-        obj, obj_k = sol.wrss + penalty(theta), wrss_k + penalty(theta_k)
-        worse = (it > 0) & (obj > obj_k + 1e-10 * jnp.abs(obj_k))
-        pick = lambda bad, good: jax.tree_util.tree_map(  # noqa: E731
-            lambda x, y: jnp.where(worse, x, y), bad, good)
-        inf = jnp.asarray(jnp.inf, dtype)
-        nxt_nuis, nxt_theta, last, sol_out, kept_out = pick(
-            (0.5 * (nuis_k + nuisance), 0.5 * (theta_k + theta), (inf, inf), sol_kept, kept),
-            (nuisance + dnuis, theta + dtheta, (moved, moved_deg), sol,
-             (nuisance, theta, sol.wrss)))
-        return it + 1, nxt_nuis, nxt_theta, last, sol_out, kept_out
+        return _solve_pass(model, problems, freef, weakf, anchor, n_records, carry)
 
     def going(carry):
         it, _, _, (last, _), _, _ = carry
@@ -503,7 +522,8 @@ def _solve(model: _CalibrationModel, problems: _Problems, free, weak, anchor, th
     theta0 = (theta0 * freef).astype(dtype)
     inf = jnp.asarray(jnp.inf, dtype)
     kept0 = (nuisance0, theta0, inf)
-    empty = jax.eval_shape(lambda: evaluate(nuisance0, theta0, jnp.asarray(0))[0])
+    empty = jax.eval_shape(lambda: _evaluate(model, problems, freef, n_records, nuisance0,
+                                             theta0, jnp.asarray(0))[0])
     empty = jax.tree_util.tree_map(lambda x: jnp.zeros(x.shape, x.dtype), empty)
     start = (jnp.asarray(0), nuisance0, theta0, (inf, inf), empty, kept0)
     passes, _, theta, (last, last_deg), sol, _ = jax.lax.while_loop(going, step, start)

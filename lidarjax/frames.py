@@ -58,36 +58,35 @@ __all__ = [
 ]
 
 
+def _cos_sin(angle_deg):
+    """``cos``, ``sin`` of `angle_deg` degrees and the zeros and ones of its shape."""
+    t = jnp.deg2rad(jnp.asarray(angle_deg))
+    return jnp.cos(t), jnp.sin(t), jnp.zeros_like(t), jnp.ones_like(t)
+
+
+def _matrix(*rows):
+    """A ``3 x 3`` matrix (leading axes of the entries last) from its rows of entries."""
+    return jnp.stack([jnp.stack(row) for row in rows])
+
+
 def rotation_z(angle_deg: Float[ArrayLike, ""]) -> Float[Array, "3 3"]:
     """Rotation matrix about ``z`` by `angle_deg` degrees, anticlockwise seen from above."""
-    t = jnp.deg2rad(jnp.asarray(angle_deg))
-    c, s = jnp.cos(t), jnp.sin(t)
-    o, i = jnp.zeros_like(t), jnp.ones_like(t)
-    return jnp.stack(
-        [jnp.stack([c, -s, o]), jnp.stack([s, c, o]), jnp.stack([o, o, i])]
-    )
+    c, s, o, i = _cos_sin(angle_deg)
+    return _matrix((c, -s, o), (s, c, o), (o, o, i))
 
 
 def rotation_x(angle_deg: Float[ArrayLike, ""]) -> Float[Array, "3 3"]:
     """``R_x(a) = [[1, 0, 0], [0, cos a, -sin a], [0, sin a, cos a]]`` for `angle_deg` degrees
     (rotates ``+y`` towards ``+z``)."""
-    t = jnp.deg2rad(jnp.asarray(angle_deg))
-    c, s = jnp.cos(t), jnp.sin(t)
-    o, i = jnp.zeros_like(t), jnp.ones_like(t)
-    return jnp.stack(
-        [jnp.stack([i, o, o]), jnp.stack([o, c, -s]), jnp.stack([o, s, c])]
-    )
+    c, s, o, i = _cos_sin(angle_deg)
+    return _matrix((i, o, o), (o, c, -s), (o, s, c))
 
 
 def rotation_y(angle_deg: Float[ArrayLike, ""]) -> Float[Array, "3 3"]:
     """``R_y(b) = [[cos b, 0, sin b], [0, 1, 0], [-sin b, 0, cos b]]`` for `angle_deg` degrees
     (rotates ``+z`` towards ``+x``)."""
-    t = jnp.deg2rad(jnp.asarray(angle_deg))
-    c, s = jnp.cos(t), jnp.sin(t)
-    o, i = jnp.zeros_like(t), jnp.ones_like(t)
-    return jnp.stack(
-        [jnp.stack([c, o, s]), jnp.stack([o, i, o]), jnp.stack([-s, o, c])]
-    )
+    c, s, o, i = _cos_sin(angle_deg)
+    return _matrix((c, o, s), (o, i, o), (-s, o, c))
 
 
 def tilt_rotation(

@@ -141,6 +141,59 @@ def _residuals(y, args):
     return sw * (los - speed * _row(geom, coefficients, hidx, d))
 
 
+def _usable(w):
+    """The usable beams' count and the residual weights ``sqrt(w)`` (0 where ``w <= 0``)."""
+    usable = w > 0
+    n_beams = jnp.sum(usable.astype(jnp.int32))
+    return n_beams, jnp.sqrt(jnp.where(usable, w, 1.0)) * usable
+
+
+def _noise_level(w, resid, n_beams, n_free, noise, scale):
+    """The weighted residual RMS (NaN without weights) and the noise variance ``sigma**2``
+    in units of `scale`: from `noise` (m/s) when given, else ``wrss / (n_beams - n_free)``
+    (NaN without spare beams)."""
+    wrss = jnp.sum(w * resid * resid)
+    wsum = jnp.sum(w)
+    residual_rms = jnp.where(wsum > 0, jnp.sqrt(wrss / jnp.where(wsum > 0, wsum, 1.0)), jnp.nan)
+    dof = n_beams - n_free
+    sigma2_est = jnp.where(dof > 0, wrss / jnp.maximum(dof, 1), jnp.nan)
+    return residual_rms, jnp.where(jnp.isnan(noise), sigma2_est, (noise / scale) ** 2)
+
+
+def _wrap360(d):
+    """Degrees wrapped to ``[0, 360)`` (``mod`` can round up to 360 itself)."""
+    direction = jnp.mod(d, 360.0)
+    return jnp.where(direction >= 360.0, direction - 360.0, direction)
+
+
+def _one_statistics(los, w, n_beams, noise, scale, speed, d, hidx, geom, coefficients):
+    """The residual RMS, ``sigma**2``, the variances of speed and direction (Schur
+    complements of ``J^T W J`` in (U, d [degrees]); inf where singular) and whether the
+    direction is identifiable independently of the speed, at the solution ``(speed, d)``."""
+    dtype = los.dtype
+    r_d, dr_d = jax.jvp(lambda x: _row(geom, coefficients, hidx, x), (d,), (jnp.ones_like(d),))
+    residual_rms, sigma2 = _noise_level(w, los - speed * r_d, n_beams, 2, noise, scale)
+    m_uu = jnp.sum(w * r_d * r_d)
+    m_ud = jnp.sum(w * r_d * dr_d) * speed
+    m_dd = jnp.sum(w * dr_d * dr_d) * speed * speed
+    schur_u = m_uu - jnp.where(m_dd > 0, m_ud * m_ud / jnp.where(m_dd > 0, m_dd, 1.0), 0.0)
+    schur_d = m_dd - jnp.where(m_uu > 0, m_ud * m_ud / jnp.where(m_uu > 0, m_uu, 1.0), 0.0)
+    inf = jnp.asarray(jnp.inf, dtype)
+    var_u = jnp.where(schur_u > 0, sigma2 / jnp.where(schur_u > 0, schur_u, 1.0), inf)
+    var_d = jnp.where(schur_d > 0, sigma2 / jnp.where(schur_d > 0, schur_d, 1.0), inf)
+
+    # Identifiability of the direction, independent of the speed: [R, dR/dd (per radian)].
+    g = dr_d * (180.0 / np.pi)
+    g_uu, g_ud, g_dd = m_uu, jnp.sum(w * r_d * g), jnp.sum(w * g * g)
+    tr = g_uu + g_dd
+    det = g_uu * g_dd - g_ud * g_ud
+    disc = jnp.sqrt(jnp.maximum(tr * tr - 4.0 * det, 0.0))
+    lam_min = 0.5 * (tr - disc)
+    lam_max = 0.5 * (tr + disc)
+    rcond = jnp.sqrt(jnp.finfo(dtype).eps)
+    return residual_rms, sigma2, var_u, var_d, lam_min > rcond * lam_max
+
+
 def _solve_one(los, w, hidx, noise, k, u0, scale, knots, geom, coefficients, cfg):
     """One record-height, in units of `scale` (the record's weighted RMS LOS, m/s; 1 for an
     all-zero record): `los`, `w` ``(b,)`` (cleaned: unusable beams have ``w = 0`` and
@@ -153,9 +206,7 @@ def _solve_one(los, w, hidx, noise, k, u0, scale, knots, geom, coefficients, cfg
     underflow or overflow when squared."""
     solver, max_steps, min_beams = cfg
     dtype = los.dtype
-    usable = w > 0
-    n_beams = jnp.sum(usable.astype(jnp.int32))
-    sw = jnp.sqrt(jnp.where(usable, w, 1.0)) * usable
+    n_beams, sw = _usable(w)
     d0 = jnp.deg2rad(knots[k])
     unit = jnp.stack([-jnp.sin(d0), -jnp.cos(d0)])
 
@@ -176,36 +227,8 @@ def _solve_one(los, w, hidx, noise, k, u0, scale, knots, geom, coefficients, cfg
     y = jnp.where(trivial, 0.0, sol.value)
     speed, d, calm = _polar(y)
     d = jnp.where(calm, knots[k], d)  # a direction for the calm Jacobian (speed variance)
-
-    # Jacobian in (U, d [degrees]) at the solution (U in units of `scale`).
-    r_d, dr_d = jax.jvp(lambda x: _row(geom, coefficients, hidx, x), (d,), (jnp.ones_like(d),))
-    resid = los - speed * r_d
-    wrss = jnp.sum(w * resid * resid)
-    wsum = jnp.sum(w)
-    residual_rms = jnp.sqrt(wrss / jnp.where(wsum > 0, wsum, 1.0))
-    residual_rms = jnp.where(wsum > 0, residual_rms, jnp.nan)
-    dof = n_beams - 2
-    sigma2_est = jnp.where(dof > 0, wrss / jnp.maximum(dof, 1), jnp.nan)
-    sigma2 = jnp.where(jnp.isnan(noise), sigma2_est, (noise / scale) ** 2)
-    m_uu = jnp.sum(w * r_d * r_d)
-    m_ud = jnp.sum(w * r_d * dr_d) * speed
-    m_dd = jnp.sum(w * dr_d * dr_d) * speed * speed
-    schur_u = m_uu - jnp.where(m_dd > 0, m_ud * m_ud / jnp.where(m_dd > 0, m_dd, 1.0), 0.0)
-    schur_d = m_dd - jnp.where(m_uu > 0, m_ud * m_ud / jnp.where(m_uu > 0, m_uu, 1.0), 0.0)
-    inf = jnp.asarray(jnp.inf, dtype)
-    var_u = jnp.where(schur_u > 0, sigma2 / jnp.where(schur_u > 0, schur_u, 1.0), inf)
-    var_d = jnp.where(schur_d > 0, sigma2 / jnp.where(schur_d > 0, schur_d, 1.0), inf)
-
-    # Identifiability of the direction, independent of the speed: [R, dR/dd (per radian)].
-    g = dr_d * (180.0 / np.pi)
-    g_uu, g_ud, g_dd = m_uu, jnp.sum(w * r_d * g), jnp.sum(w * g * g)
-    tr = g_uu + g_dd
-    det = g_uu * g_dd - g_ud * g_ud
-    disc = jnp.sqrt(jnp.maximum(tr * tr - 4.0 * det, 0.0))
-    lam_min = 0.5 * (tr - disc)
-    lam_max = 0.5 * (tr + disc)
-    rcond = jnp.sqrt(jnp.finfo(dtype).eps)
-    well_posed = lam_min > rcond * lam_max
+    residual_rms, sigma2, var_u, var_d, well_posed = _one_statistics(
+        los, w, n_beams, noise, scale, speed, d, hidx, geom, coefficients)
 
     ok_solver = sol.result == optx.RESULTS.successful
     finite = jnp.all(jnp.isfinite(y))
@@ -219,11 +242,10 @@ def _solve_one(los, w, hidx, noise, k, u0, scale, knots, geom, coefficients, cfg
         | jnp.where(converged & jnp.isnan(sigma2), int(InverseFlag.NO_NOISE_ESTIMATE), 0)
     )
     nan = jnp.asarray(jnp.nan, dtype)
-    direction = jnp.mod(d, 360.0)
-    direction = jnp.where(direction >= 360.0, direction - 360.0, direction)
-    out = dict(
+    inf = jnp.asarray(jnp.inf, dtype)
+    return dict(
         speed=jnp.where(converged, speed * scale, nan),
-        direction=jnp.where(converged & ~calm, direction, nan),
+        direction=jnp.where(converged & ~calm, _wrap360(d), nan),
         converged=converged,
         residual_rms=residual_rms * scale,
         speed_std=jnp.where(converged, jnp.sqrt(var_u) * scale, nan),
@@ -234,7 +256,6 @@ def _solve_one(los, w, hidx, noise, k, u0, scale, knots, geom, coefficients, cfg
         result=sol.result,
         flags=flags.astype(jnp.int32),
     )
-    return out
 
 
 def default_solver(dtype=None) -> optx.AbstractLeastSquaresSolver:
@@ -674,42 +695,21 @@ def _joint_residuals(y, args):
     return (sw * (los - speed * _joint_shape(ctx, d, a))).reshape(-1)
 
 
-def _joint_one(los, w, noise, k, j, u0, scale, ctx, knots, cfg):
-    """One record: `los`, `w` ``(h, b)`` cleaned and in units of `scale`; `noise` scalar
-    (m/s, NaN: estimate); start: direction knot `k`, parameter index `j`, speed `u0`."""
-    solver, max_steps, min_beams = cfg
-    dtype = los.dtype
-    usable = w > 0
-    n_beams = jnp.sum(usable.astype(jnp.int32))
-    sw = jnp.sqrt(jnp.where(usable, w, 1.0)) * usable
-    d0 = knots[k]
-    a0 = ctx.pknots[j]
+def _joint_start_and_solve(los, sw, trivial, d0, a0, u0, ctx, solver, max_steps):
+    """Least squares over ``(u, v, scaled parameter)`` from the tabulated start; a problem
+    that cannot start (`trivial`) is swapped for the table's own shape at the start."""
     unit = jnp.stack([-jnp.sin(jnp.deg2rad(d0)), -jnp.cos(jnp.deg2rad(d0))])
-    trivial = (u0 <= 0) | (n_beams < min_beams)
     args = (jnp.where(trivial, _joint_shape(ctx, d0, a0), los),
             jnp.where(trivial, jnp.ones_like(sw), sw), ctx)
     s0 = (a0 - ctx.centre) / ctx.span
     y0 = jax.lax.stop_gradient(jnp.concatenate([jnp.where(trivial, unit, u0 * unit), s0[None]]))
-    sol = optx.least_squares(_joint_residuals, solver, y0, args, max_steps=max_steps,
-                             throw=False)
-    y = sol.value
-    speed, d, calm = _polar(y[:2])
-    d = jnp.where(calm, d0, d)
-    a = ctx.centre + y[2] * ctx.span
+    return optx.least_squares(_joint_residuals, solver, y0, args, max_steps=max_steps,
+                              throw=False)
 
-    def model(theta):
-        return (theta[0] * _joint_shape(ctx, theta[1], theta[2])).reshape(-1)
 
-    theta = jnp.stack([speed, d, a])
-    jac = jax.jacfwd(model)(theta)  # (n, 3); direction per degree
-    wf = w.reshape(-1)
-    resid = los.reshape(-1) - model(theta)
-    wrss = jnp.sum(wf * resid * resid)
-    wsum = jnp.sum(wf)
-    residual_rms = jnp.where(wsum > 0, jnp.sqrt(wrss / jnp.where(wsum > 0, wsum, 1.0)), jnp.nan)
-    dof = n_beams - 3
-    sigma2_est = jnp.where(dof > 0, wrss / jnp.maximum(dof, 1), jnp.nan)
-    sigma2 = jnp.where(jnp.isnan(noise), sigma2_est, (noise / scale) ** 2)
+def _joint_covariance(wf, jac, sigma2, dtype):
+    """``sigma**2 (J^T W J)^-1`` of (speed, direction, parameter) (equilibrated before the
+    conditioning test), its standard deviations, correlation and whether it is well posed."""
     m = jnp.einsum("n,ni,nj->ij", wf, jac, jac, precision=HIGHEST)
     diag = jnp.sqrt(jnp.maximum(jnp.diagonal(m), 0.0))
     pos = diag > 0
@@ -722,7 +722,33 @@ def _joint_one(los, w, noise, k, j, u0, scale, ctx, knots, cfg):
     cov = sigma2 * inv / (dn[:, None] * dn[None, :])
     std = jnp.sqrt(jnp.maximum(jnp.diagonal(cov), 0.0))
     sd = jnp.where(std > 0, std, 1.0)
-    corr = cov / (sd[:, None] * sd[None, :])
+    return cov, std, cov / (sd[:, None] * sd[None, :]), well_posed
+
+
+def _joint_one(los, w, noise, k, j, u0, scale, ctx, knots, cfg):
+    """One record: `los`, `w` ``(h, b)`` cleaned and in units of `scale`; `noise` scalar
+    (m/s, NaN: estimate); start: direction knot `k`, parameter index `j`, speed `u0`."""
+    solver, max_steps, min_beams = cfg
+    dtype = los.dtype
+    n_beams, sw = _usable(w)
+    d0 = knots[k]
+    trivial = (u0 <= 0) | (n_beams < min_beams)
+    sol = _joint_start_and_solve(los, sw, trivial, d0, ctx.pknots[j], u0, ctx, solver,
+                                 max_steps)
+    y = sol.value
+    speed, d, calm = _polar(y[:2])
+    d = jnp.where(calm, d0, d)
+    a = ctx.centre + y[2] * ctx.span
+
+    def model(theta):
+        return (theta[0] * _joint_shape(ctx, theta[1], theta[2])).reshape(-1)
+
+    theta = jnp.stack([speed, d, a])
+    jac = jax.jacfwd(model)(theta)  # (n, 3); direction per degree
+    wf = w.reshape(-1)
+    residual_rms, sigma2 = _noise_level(wf, los.reshape(-1) - model(theta), n_beams, 3, noise,
+                                        scale)
+    cov, std, corr, well_posed = _joint_covariance(wf, jac, sigma2, dtype)
     # the speed at each height and its uncertainty
     f, df = jax.jvp(lambda x: ctx.profile(ctx.heights, x), (a,), (jnp.ones_like(a),))
     g = jnp.stack([f, jnp.zeros_like(f), speed * df], axis=-1)  # (h, 3)
@@ -743,11 +769,9 @@ def _joint_one(los, w, noise, k, j, u0, scale, ctx, knots, cfg):
         | jnp.where(converged & outside, int(InverseFlag.PARAMETER_EXTRAPOLATED), 0)
     )
     nan = jnp.asarray(jnp.nan, dtype)
-    direction = jnp.mod(d, 360.0)
-    direction = jnp.where(direction >= 360.0, direction - 360.0, direction)
     return dict(
         speed=jnp.where(converged, speed * scale, nan),
-        direction=jnp.where(converged, direction, nan),
+        direction=jnp.where(converged, _wrap360(d), nan),
         parameter=jnp.where(converged, a, nan),
         speed_std=jnp.where(converged, std[0] * scale, nan),
         direction_std=jnp.where(converged, std[1], nan),

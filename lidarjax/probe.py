@@ -231,6 +231,14 @@ def _reference_nodes(cls: str, n_nodes, dtype) -> jax.Array:
     return jnp.asarray(_midpoints(n), dtype)
 
 
+def _quadrature(cls: str, n_nodes, default: int, tail):
+    """A probe's quadrature, checked: its `tail` (a float and an array of the default float)
+    and its reference nodes (`n_nodes`, or `default` when None)."""
+    n, t = _check_nodes_tail(cls, default if n_nodes is None else n_nodes, tail)
+    dtype = default_float()
+    return t, jnp.asarray(t, dtype), _reference_nodes(cls, n, jnp.dtype(dtype))
+
+
 def _pulsed_weight(erf, offset, rp, dp):
     """The pulsed weighting ``phi(offset)`` (1 / length) for ``rp`` and gate length ``dp``
     (`erf` of jax or scipy: traced or host)."""
@@ -341,14 +349,12 @@ class PulsedProbe(AbstractProbe):
         n_nodes: int | None = None,
         tail: float = 1e-3,
     ):
+        t, self.tail, self.ref_nodes = _quadrature("PulsedProbe", n_nodes,
+                                                   DEFAULT_PULSED_NODES, tail)
         self.auto_nodes = n_nodes is None
-        n, t = _check_nodes_tail("PulsedProbe", DEFAULT_PULSED_NODES if n_nodes is None else n_nodes, tail)
         self.pulse_fwhm = _param("PulsedProbe: pulse_fwhm", pulse_fwhm)
         self.gate_length = _param("PulsedProbe: gate_length", gate_length)
-        dtype = default_float()
-        self.tail = jnp.asarray(t, dtype)
-        self.truncation = jnp.asarray(special.erfcinv(t), dtype)
-        self.ref_nodes = _reference_nodes("PulsedProbe", n, jnp.dtype(dtype))
+        self.truncation = jnp.asarray(special.erfcinv(t), default_float())
 
     @property
     def n_nodes(self) -> int:
@@ -479,15 +485,12 @@ class CWProbe(AbstractProbe):
         tail: float = 0.1,
         resolution=None,
     ):
+        _, self.tail, self.ref_nodes = _quadrature("CWProbe", n_nodes, DEFAULT_CW_NODES, tail)
         self.auto_nodes = n_nodes is None
-        n, t = _check_nodes_tail("CWProbe", DEFAULT_CW_NODES if n_nodes is None else n_nodes, tail)
         self.wavelength = _param("CWProbe: wavelength", wavelength)
         self.aperture_radius = _param("CWProbe: aperture_radius", aperture_radius)
-        dtype = default_float()
-        self.tail = jnp.asarray(t, dtype)
-        self.resolution = (jnp.asarray(np.inf, dtype) if resolution is None
+        self.resolution = (jnp.asarray(np.inf, default_float()) if resolution is None
                            else _param("CWProbe: resolution", resolution))
-        self.ref_nodes = _reference_nodes("CWProbe", n, jnp.dtype(dtype))
 
     @property
     def n_nodes(self) -> int:

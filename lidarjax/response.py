@@ -332,6 +332,82 @@ def _gradient_along(field, origin_local, directions, ranges, probe):
         return gradient_along_beams(field, origin_local, directions, ranges, probe)
 
 
+def _sorted_directions(directions, response):
+    """The table's directions checked and wrapped to ``[0, 360)``: the sort `order`, the
+    sorted `knots` (degrees) and `response` ``(s, h, b)`` checked (host float64, unsorted)."""
+    d = _host_float(directions, "directions")
+    r = _host_float(response, "response")
+    if d.ndim != 1 or d.size < 3:
+        raise ValueError(
+            f"ResponseTable: `directions` must be a 1-D array of at least 3 inflow directions "
+            f"in degrees, got shape {d.shape}."
+        )
+    if not np.all(np.isfinite(d)):
+        raise ValueError(
+            f"ResponseTable: `directions` must be finite degrees, got {d.tolist()}."
+        )
+    if r.ndim != 3 or r.shape[0] != d.size:
+        raise ValueError(
+            f"ResponseTable: `response` must be shaped (s, h, b) = ({d.size}, heights, beams) "
+            f"for {d.size} directions, got shape {r.shape}."
+        )
+    if r.shape[1] == 0 or r.shape[2] == 0:
+        raise ValueError(f"ResponseTable: `response` has no heights or beams: {r.shape}.")
+    wrapped = np.mod(d, 360.0)
+    wrapped = np.where(wrapped >= 360.0, 0.0, wrapped)
+    order = np.argsort(wrapped, kind="stable")
+    knots = wrapped[order]
+    gaps = np.diff(np.append(knots, knots[0] + 360.0))
+    if np.any(gaps <= DUPLICATE_TOL):
+        k = int(np.argmin(gaps))
+        raise ValueError(
+            f"ResponseTable: `directions` must be unique modulo 360; {knots[k]:g} deg appears "
+            f"twice (e.g. 0 and 360). Drop or average the duplicate runs."
+        )
+    return order, knots, r
+
+
+def _optional_column(name, value, shape, order, knots, dtype, response_shape):
+    """An optional per-direction array of a table, checked against `shape`, sorted by
+    `order` and fitted: ``(array, spline)``, or ``(None, None)`` without one."""
+    if value is None:
+        return None, None
+    a = _host_float(value, name)
+    if a.shape != shape:
+        raise ValueError(
+            f"ResponseTable: `{name}` must be shaped {shape} to match `response` "
+            f"(s, h, b) = {response_shape}; got {a.shape}."
+        )
+    a = a[order]
+    _check_columns(name, a, knots)
+    return jnp.asarray(a, dtype), _fit(knots, a, dtype)
+
+
+def _checked_beam_vectors(beam_vectors, b: int, dtype):
+    """`beam_vectors` ``(b, 3)`` unit vectors (north frame) or None."""
+    if beam_vectors is None:
+        return None
+    n = _host_float(beam_vectors, "beam_vectors")
+    if n.shape != (b, 3) or not np.allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-6):
+        raise ValueError(
+            f"ResponseTable: `beam_vectors` must be ({b}, 3) unit vectors (north frame), "
+            f"got shape {n.shape}."
+        )
+    return jnp.asarray(n, dtype)
+
+
+def _checked_heights(heights, h: int, dtype):
+    """`heights` ``(h,)`` metres or None."""
+    if heights is None:
+        return None
+    hh = _host_float(heights, "heights")
+    if hh.shape != (h,):
+        raise ValueError(
+            f"ResponseTable: `heights` must be shaped ({h},), got {hh.shape}."
+        )
+    return jnp.asarray(hh, dtype)
+
+
 class ResponseTable(eqx.Module):
     """What a lidar measures per unit free-stream speed, tabulated against inflow direction.
 
@@ -403,35 +479,7 @@ class ResponseTable(eqx.Module):
             raise ValueError("ResponseTable: `instrument` must be a lidarjax.Instrument "
                              "(Instrument.of(scan, mount, heights, probe)) or None.")
         self.instrument = instrument
-        d = _host_float(directions, "directions")
-        r = _host_float(response, "response")
-        if d.ndim != 1 or d.size < 3:
-            raise ValueError(
-                f"ResponseTable: `directions` must be a 1-D array of at least 3 inflow directions "
-                f"in degrees, got shape {d.shape}."
-            )
-        if not np.all(np.isfinite(d)):
-            raise ValueError(
-                f"ResponseTable: `directions` must be finite degrees, got {d.tolist()}."
-            )
-        if r.ndim != 3 or r.shape[0] != d.size:
-            raise ValueError(
-                f"ResponseTable: `response` must be shaped (s, h, b) = ({d.size}, heights, beams) "
-                f"for {d.size} directions, got shape {r.shape}."
-            )
-        if r.shape[1] == 0 or r.shape[2] == 0:
-            raise ValueError(f"ResponseTable: `response` has no heights or beams: {r.shape}.")
-        wrapped = np.mod(d, 360.0)
-        wrapped = np.where(wrapped >= 360.0, 0.0, wrapped)
-        order = np.argsort(wrapped, kind="stable")
-        knots = wrapped[order]
-        gaps = np.diff(np.append(knots, knots[0] + 360.0))
-        if np.any(gaps <= DUPLICATE_TOL):
-            k = int(np.argmin(gaps))
-            raise ValueError(
-                f"ResponseTable: `directions` must be unique modulo 360; {knots[k]:g} deg appears "
-                f"twice (e.g. 0 and 360). Drop or average the duplicate runs."
-            )
+        order, knots, r = _sorted_directions(directions, response)
         s, h, b = r.shape
         r = r[order]
         _check_columns("response", r, knots)
@@ -441,17 +489,7 @@ class ResponseTable(eqx.Module):
         self.response_spline = _fit(knots, r, dtype)
 
         def optional(name, value, shape):
-            if value is None:
-                return None, None
-            a = _host_float(value, name)
-            if a.shape != shape:
-                raise ValueError(
-                    f"ResponseTable: `{name}` must be shaped {shape} to match `response` "
-                    f"(s, h, b) = {r.shape}; got {a.shape}."
-                )
-            a = a[order]
-            _check_columns(name, a, knots)
-            return jnp.asarray(a, dtype), _fit(knots, a, dtype)
+            return _optional_column(name, value, shape, order, knots, dtype, r.shape)
 
         self.reconstructed, self.reconstructed_spline = optional(
             "reconstructed", reconstructed, (s, h, 3)
@@ -463,25 +501,8 @@ class ResponseTable(eqx.Module):
         self.beam_gradient, self.beam_gradient_spline = optional(
             "beam_gradient", beam_gradient, (s, h, b, 3, 3)
         )
-        if beam_vectors is None:
-            self.beam_vectors = None
-        else:
-            n = _host_float(beam_vectors, "beam_vectors")
-            if n.shape != (b, 3) or not np.allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-6):
-                raise ValueError(
-                    f"ResponseTable: `beam_vectors` must be ({b}, 3) unit vectors (north frame), "
-                    f"got shape {n.shape}."
-                )
-            self.beam_vectors = jnp.asarray(n, dtype)
-        if heights is None:
-            self.heights = None
-        else:
-            hh = _host_float(heights, "heights")
-            if hh.shape != (h,):
-                raise ValueError(
-                    f"ResponseTable: `heights` must be shaped ({h},), got {hh.shape}."
-                )
-            self.heights = jnp.asarray(hh, dtype)
+        self.beam_vectors = _checked_beam_vectors(beam_vectors, b, dtype)
+        self.heights = _checked_heights(heights, h, dtype)
 
     # ----------------------------------------------------------------------------------------
     @property
@@ -588,112 +609,31 @@ class ResponseTable(eqx.Module):
         ``horizontal_speed(free_velocity)``: `response` from ``los``, `reconstructed` from
         ``lidar_velocity`` and `point` from ``point_velocity`` (all north frame).
         """
-        if isinstance(sims, Simulation):
-            stacked = sims
-            if stacked.los.ndim != 3:
-                raise ValueError(
-                    "ResponseTable.from_simulations: a single Simulation must carry a leading "
-                    "run axis (los shaped (s, h, b)); pass a list of Simulations otherwise."
-                )
-        else:
-            sims = list(sims)
-            if not sims or not all(isinstance(x, Simulation) for x in sims):
-                raise ValueError(
-                    "ResponseTable.from_simulations: `sims` must be a non-empty sequence of "
-                    "lidarjax.Simulation."
-                )
-            shapes = {tuple(x.los.shape) for x in sims}
-            if len(shapes) != 1:
-                raise ValueError(
-                    f"ResponseTable.from_simulations: every run needs the same heights and beams; "
-                    f"got LOS shapes {sorted(shapes)}."
-                )
-            stacked = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *sims)
-        if stacked.free_velocity is None:
-            raise ValueError(
-                "ResponseTable.from_simulations: the simulations carry no free stream; run "
-                "lidarjax.simulate(..., u_ref=...) with each run's free-stream vector."
-            )
-        free = np.asarray(stacked.free_velocity, np.float64)
-        s = free.shape[0]
-        speed = np.asarray(horizontal_speed(free))
-        if not np.all(speed > 0):
-            raise ValueError(
-                "ResponseTable.from_simulations: every run needs a nonzero horizontal free "
-                "stream (u_ref) to normalise by."
-            )
-        directions = np.asarray(wind_direction(free))
-        heights = np.asarray(stacked.heights, np.float64)
-        if not np.allclose(heights, heights[:1]):
-            raise ValueError("ResponseTable.from_simulations: the runs have different heights.")
+        stacked = _stacked_runs(sims)
+        speed, directions, heights = _free_streams(stacked)
+        s = speed.shape[0]
         dtype = stacked.los.dtype
         norm = lambda a: np.asarray(a, np.float64) / speed.reshape((s,) + (1,) * (a.ndim - 1))  # noqa: E731
         response = norm(stacked.los)
         reconstructed = norm(stacked.lidar_velocity)
         point = None if stacked.point_velocity is None else norm(stacked.point_velocity)
-        given_velocity, beam_vectors, beam_velocity, gradient = beam_velocity, None, None, None
+        beam_vectors, gradient = None, None
         if beam_gradient is not None:
             if fields is not None:
                 raise ValueError("ResponseTable.from_simulations: give `fields` or "
                                  "`beam_gradient`, not both.")
             gradient = norm(np.asarray(beam_gradient, np.float64))
-        if given_velocity is not None:
-            if fields is not None or mount is None:
-                raise ValueError("ResponseTable.from_simulations: `beam_velocity` needs `mount` "
-                                 "and replaces `fields`; give one of them.")
+        if beam_velocity is not None and (fields is not None or mount is None):
+            raise ValueError("ResponseTable.from_simulations: `beam_velocity` needs `mount` "
+                             "and replaces `fields`; give one of them.")
         if mount is not None:
-            batched = None
-            if isinstance(mount, Mount):
-                if mount.batch_shape:  # split on the host: not one device slice per leaf
-                    mount = batched = jax.tree_util.tree_map(np.asarray, mount)
-                mounts = list(mount) if mount.batch_shape else [mount] * s
-            else:
-                mounts = list(mount)
-            if len(mounts) != s or not all(isinstance(m, Mount) for m in mounts):
-                raise ValueError(
-                    f"ResponseTable.from_simulations: `mount` must be a Mount or {s} Mounts."
-                )
-            rot = np.asarray(jax.vmap(cfd_to_north_rotation)(batched), np.float64) if (
-                batched is not None) else np.stack(
-                [np.asarray(cfd_to_north_rotation(m), np.float64) for m in mounts])
-            dirs = np.asarray(stacked.directions, np.float64)  # (s, b, 3) CFD frame
-            n_north = np.einsum("sij,sbj->sbi", rot, dirs)
-            if not np.allclose(n_north, n_north[:1], atol=1e-6):
-                raise ValueError(
-                    "ResponseTable.from_simulations: the beams point in different north-frame "
-                    "directions in different runs; check the mounts (epsilon, psi, beta, gamma)."
-                )
-            beam_vectors = n_north[0]
-            if given_velocity is not None:
-                beam_velocity = norm(np.asarray(given_velocity, np.float64))
+            mounts, rot, beam_vectors = _north_beams(mount, stacked, s)
+            if beam_velocity is not None:
+                beam_velocity = norm(np.asarray(beam_velocity, np.float64))
             if fields is not None:
-                fields = list(fields)
-                if len(fields) != s:
-                    raise ValueError(
-                        f"ResponseTable.from_simulations: `fields` needs one field per run ({s})."
-                    )
-                # the beam points in float64 from the mounts (`Simulation.points` are rounded
-                # to the working dtype: a 0.03-0.5 m grid at UTM coordinates in float32), made
-                # relative to each field's origin before rounding
-                ranges = np.asarray(stacked.ranges, np.float64)  # (s, h, b), tilt-independent
-                vel, grad = [], []
-                for i, f in enumerate(fields):
-                    m = mounts[i]
-                    loc = np.asarray(m.location, np.float64) + np.asarray(m.location_lo, np.float64)
-                    origin = np.asarray(f.origin, np.float64) + np.asarray(f.origin_lo, np.float64)
-                    local = (loc - origin) + ranges[i][..., None] * dirs[i][None]
-                    vel.append(np.asarray(_sample_local(f, jnp.asarray(local.astype(f.dtype))),
-                                          np.float64))
-                    p = PointProbe() if probe is None else probe
-                    if scan is not None:
-                        p = probe_for_field(f, scan, heights[i], p, mount=m,
-                                            caller="ResponseTable.from_simulations")
-                    to_f = lambda a, f=f: jnp.asarray(np.asarray(a).astype(f.dtype))  # noqa: E731
-                    grad.append(np.asarray(_gradient_along(
-                        f, to_f(loc - origin), to_f(dirs[i]), to_f(ranges[i]), p), np.float64))
-                vel = np.stack(vel)
+                vel, grad = _sampled_along_beams(fields, mounts, stacked, heights, scan, probe)
                 beam_velocity = norm(np.einsum("sij,shbj->shbi", rot, vel))
-                gradient = norm(np.einsum("sik,shbkl,sjl->shbij", rot, np.stack(grad), rot))
+                gradient = norm(np.einsum("sik,shbkl,sjl->shbij", rot, grad, rot))
         elif fields is not None:
             raise ValueError(
                 "ResponseTable.from_simulations: `fields` needs `mount` to rotate the sampled "
@@ -712,6 +652,115 @@ class ResponseTable(eqx.Module):
             instrument=instrument if instrument is not None or scan is None
             else Instrument.of(scan, mount, heights[0], probe),
         )
+
+
+# ------------------------------------------------------------------------------------------
+# The steps of `ResponseTable.from_simulations`
+
+
+def _stacked_runs(sims) -> Simulation:
+    """The runs as one `Simulation` with a leading run axis (one given stacked, or a list)."""
+    if isinstance(sims, Simulation):
+        if sims.los.ndim != 3:
+            raise ValueError(
+                "ResponseTable.from_simulations: a single Simulation must carry a leading "
+                "run axis (los shaped (s, h, b)); pass a list of Simulations otherwise."
+            )
+        return sims
+    sims = list(sims)
+    if not sims or not all(isinstance(x, Simulation) for x in sims):
+        raise ValueError(
+            "ResponseTable.from_simulations: `sims` must be a non-empty sequence of "
+            "lidarjax.Simulation."
+        )
+    shapes = {tuple(x.los.shape) for x in sims}
+    if len(shapes) != 1:
+        raise ValueError(
+            f"ResponseTable.from_simulations: every run needs the same heights and beams; "
+            f"got LOS shapes {sorted(shapes)}."
+        )
+    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *sims)
+
+
+def _free_streams(stacked: Simulation):
+    """Each run's horizontal free-stream speed ``(s,)`` (m/s) and meteorological direction
+    ``(s,)`` (degrees), and the heights ``(s, h)`` (float64), checked."""
+    if stacked.free_velocity is None:
+        raise ValueError(
+            "ResponseTable.from_simulations: the simulations carry no free stream; run "
+            "lidarjax.simulate(..., u_ref=...) with each run's free-stream vector."
+        )
+    free = np.asarray(stacked.free_velocity, np.float64)
+    speed = np.asarray(horizontal_speed(free))
+    if not np.all(speed > 0):
+        raise ValueError(
+            "ResponseTable.from_simulations: every run needs a nonzero horizontal free "
+            "stream (u_ref) to normalise by."
+        )
+    heights = np.asarray(stacked.heights, np.float64)
+    if not np.allclose(heights, heights[:1]):
+        raise ValueError("ResponseTable.from_simulations: the runs have different heights.")
+    return speed, np.asarray(wind_direction(free)), heights
+
+
+def _north_beams(mount, stacked: Simulation, s: int):
+    """The runs' mounts (a list of `s`), their CFD-to-north rotations ``(s, 3, 3)`` and the
+    beams' unit vectors in the north frame ``(b, 3)``, which every run must share."""
+    batched = None
+    if isinstance(mount, Mount):
+        if mount.batch_shape:  # split on the host: not one device slice per leaf
+            mount = batched = jax.tree_util.tree_map(np.asarray, mount)
+        mounts = list(mount) if mount.batch_shape else [mount] * s
+    else:
+        mounts = list(mount)
+    if len(mounts) != s or not all(isinstance(m, Mount) for m in mounts):
+        raise ValueError(
+            f"ResponseTable.from_simulations: `mount` must be a Mount or {s} Mounts."
+        )
+    rot = np.asarray(jax.vmap(cfd_to_north_rotation)(batched), np.float64) if (
+        batched is not None) else np.stack(
+        [np.asarray(cfd_to_north_rotation(m), np.float64) for m in mounts])
+    dirs = np.asarray(stacked.directions, np.float64)  # (s, b, 3) CFD frame
+    n_north = np.einsum("sij,sbj->sbi", rot, dirs)
+    if not np.allclose(n_north, n_north[:1], atol=1e-6):
+        raise ValueError(
+            "ResponseTable.from_simulations: the beams point in different north-frame "
+            "directions in different runs; check the mounts (epsilon, psi, beta, gamma)."
+        )
+    return mounts, rot, n_north[0]
+
+
+def _sampled_along_beams(fields, mounts, stacked: Simulation, heights, scan, probe):
+    """The velocity at the beam points ``(s, h, b, 3)`` and its gradient along the beams
+    ``(s, h, b, 3, 3)`` (CFD frame, float64) sampled from each run's field, over `probe`'s
+    volume (its nodes chosen per field as `simulate` does when `scan` is given)."""
+    fields = list(fields)
+    s = len(mounts)
+    if len(fields) != s:
+        raise ValueError(
+            f"ResponseTable.from_simulations: `fields` needs one field per run ({s})."
+        )
+    # the beam points in float64 from the mounts (`Simulation.points` are rounded
+    # to the working dtype: a 0.03-0.5 m grid at UTM coordinates in float32), made
+    # relative to each field's origin before rounding
+    ranges = np.asarray(stacked.ranges, np.float64)  # (s, h, b), tilt-independent
+    dirs = np.asarray(stacked.directions, np.float64)  # (s, b, 3) CFD frame
+    vel, grad = [], []
+    for i, f in enumerate(fields):
+        m = mounts[i]
+        loc = np.asarray(m.location, np.float64) + np.asarray(m.location_lo, np.float64)
+        origin = np.asarray(f.origin, np.float64) + np.asarray(f.origin_lo, np.float64)
+        local = (loc - origin) + ranges[i][..., None] * dirs[i][None]
+        vel.append(np.asarray(_sample_local(f, jnp.asarray(local.astype(f.dtype))),
+                              np.float64))
+        p = PointProbe() if probe is None else probe
+        if scan is not None:
+            p = probe_for_field(f, scan, heights[i], p, mount=m,
+                                caller="ResponseTable.from_simulations")
+        to_f = lambda a, f=f: jnp.asarray(np.asarray(a).astype(f.dtype))  # noqa: E731
+        grad.append(np.asarray(_gradient_along(
+            f, to_f(loc - origin), to_f(dirs[i]), to_f(ranges[i]), p), np.float64))
+    return np.stack(vel), np.stack(grad)
 
 
 # ------------------------------------------------------------------------------------------

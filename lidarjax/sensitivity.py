@@ -658,6 +658,97 @@ def _inverse_fn(table):
     return inv
 
 
+def _with_inverse(table, value, jac, inv_outputs):
+    """Add the inverse outputs to one sector's `value` and `jac` (in place): `invert` at the
+    nominal LOS and its implicit gradients d(inverse)/d(LOS) chained with d(LOS)/d(inputs),
+    plus one column for the record noise (the norm of the LOS gradient)."""
+    inv = _inverse_fn(table)
+    los = value["los"]
+    inv_val = inv(los)
+    # d(inverse)/d(LOS) at the nominal LOS: implicit gradients of `invert`
+    g_all = jax.jacfwd(inv)(los)  # per output (h,) + (h, b)
+    h_idx = jnp.arange(los.shape[0])
+    j_los = jnp.where(jnp.isfinite(jac["los"]), jac["los"], 0.0)
+    for o in inv_outputs:
+        g = g_all[o][h_idx, h_idx]  # (h, b): each height depends on its own beams
+        g = jnp.where(jnp.isfinite(g), g, 0.0)
+        value[o] = inv_val[o]
+        jac[o] = jnp.concatenate(
+            [jnp.einsum("hb,hbp->hp", g, j_los, precision=HIGHEST),
+             jnp.sqrt(jnp.sum(g * g, axis=-1))[:, None]], axis=-1)
+
+
+def _monte_carlo(sample, value, k, chol, n_mc, chunk, p, fwd_outputs, inv_outputs, table,
+                 noise, dtype):
+    """Monte Carlo standard deviations of one sector: `n_mc` Gaussian draws of the inputs
+    (Cholesky factor `chol`) through `sample` (in chunks of `chunk`), and for the inverse
+    outputs the drawn LOS plus i.i.d. record noise through `invert`."""
+    mc = {}
+    k1, k2 = jax.random.split(k)
+    z = jax.random.normal(k1, (n_mc, p), dtype)
+    deltas = jnp.matmul(z, chol.T.astype(dtype), precision=HIGHEST)
+    draws = jax.lax.map(sample, deltas, batch_size=chunk)
+    for o in fwd_outputs:
+        mc[o] = _mc_stats(draws[o], value[o], o)
+    if inv_outputs:
+        los_s = draws["los"] + noise * jax.random.normal(k2, draws["los"].shape, dtype)
+        inv_s = _inverse_fn(table)(los_s)
+        for o in inv_outputs:
+            mc[o] = _mc_stats(inv_s[o], value[o], o)
+    return mc
+
+
+def _over_sectors(per_sector, field, mount, u_ref, key, axes):
+    """`per_sector` of a single configuration, or vmapped over the sectors' axes `axes`
+    (field, mount, u_ref) with one random key per sector."""
+    field_axis, mount_axis, uref_axis = axes
+    if field_axis is None and mount_axis is None and uref_axis is None:
+        return per_sector(field, mount, u_ref, key)
+    n = _sector_count(field, mount, u_ref, axes)
+    keys = jax.random.split(key, n)
+    grid = isinstance(field, GridField) and field_axis == 0
+
+    def one(field_leaf, m, u, k):
+        f = unstack_field(field, field_leaf) if grid else field_leaf
+        return per_sector(f, m, u, k)
+
+    batched = field.velocity if grid else field
+    return jax.vmap(one, in_axes=(field_axis, mount_axis, uref_axis, 0))(
+        batched, mount, u_ref, keys)
+
+
+def _gum(outputs, jac, cov, std_in, noise, need_los, p, dtype):
+    """Every output's GUM budget (`_budget`): with the inverse outputs the record noise is
+    one more input (the LOS error of every beam, i.i.d.), which the forward outputs do not
+    see (their Jacobians get a zero column, in place in `jac`)."""
+    cov = cov.astype(dtype)
+    std_in = std_in.astype(dtype)
+    if need_los:
+        cov = jnp.zeros((p + 1, p + 1), dtype).at[:p, :p].set(cov).at[p, p].set(noise**2)
+        std_in = jnp.concatenate([std_in, noise[None]])
+    std, contribution, share = {}, {}, {}
+    for o in outputs:
+        j = jac[o]
+        if need_los and o not in _INVERSE_OUTPUTS:
+            j = jnp.concatenate([j, jnp.zeros(j.shape[:-1] + (1,), j.dtype)], axis=-1)
+        jac[o] = j
+        std[o], contribution[o], share[o] = _budget(j, cov, std_in)
+    return std, contribution, share, cov
+
+
+def _second_order_std(hess, cov, p, fwd_outputs):
+    """Gaussian inputs: the second-order term of var(J d + d^T H d / 2) = J C J^T +
+    tr((H C)^2) / 2, as a standard deviation per forward output."""
+    second = {}
+    c = cov[:p, :p]
+    for o in fwd_outputs:
+        hc = jnp.einsum("...ij,jk->...ik", jnp.where(jnp.isfinite(hess[o]), hess[o], 0.0), c,
+                        precision=HIGHEST)
+        var2 = 0.5 * jnp.einsum("...ij,...ji->...", hc, hc, precision=HIGHEST)
+        second[o] = jnp.sqrt(jnp.maximum(var2, 0.0))
+    return second
+
+
 @eqx.filter_jit
 def _uncertainty_core(field, scan, mount, heights, u_ref, probe, cfg, axes, chol, std_in,
                       cov, key, table, noise, n_mc, chunk):
@@ -667,7 +758,6 @@ def _uncertainty_core(field, scan, mount, heights, u_ref, probe, cfg, axes, chol
     need_los = bool(inv_outputs)
     run_outputs = fwd_outputs + (("los",) if need_los and "los" not in fwd_outputs else ())
     fcfg = (names, run_outputs, infer, point_reference, ratio_tol)
-
     dtype = field.dtype
     p = len(names)
 
@@ -678,78 +768,23 @@ def _uncertainty_core(field, scan, mount, heights, u_ref, probe, cfg, axes, chol
         else:
             value, jac = _jacobian_one(f, scan, m, heights, u, probe, fcfg)
         if need_los:
-            inv = _inverse_fn(table)
-            los = value["los"]
-            inv_val = inv(los)
-            # d(inverse)/d(LOS) at the nominal LOS: implicit gradients of `invert`
-            g_all = jax.jacfwd(inv)(los)  # per output (h,) + (h, b)
-            h_idx = jnp.arange(los.shape[0])
-            j_los = jnp.where(jnp.isfinite(jac["los"]), jac["los"], 0.0)
-            for o in inv_outputs:
-                g = g_all[o][h_idx, h_idx]  # (h, b): each height depends on its own beams
-                g = jnp.where(jnp.isfinite(g), g, 0.0)
-                value[o] = inv_val[o]
-                jac[o] = jnp.concatenate(
-                    [jnp.einsum("hb,hbp->hp", g, j_los, precision=HIGHEST),
-                     jnp.sqrt(jnp.sum(g * g, axis=-1))[:, None]], axis=-1)
+            _with_inverse(table, value, jac, inv_outputs)
         mc = {}
         if n_mc > 0:
-            k1, k2 = jax.random.split(k)
-            z = jax.random.normal(k1, (n_mc, p), dtype)
-            deltas = jnp.matmul(z, chol.T.astype(dtype), precision=HIGHEST)
-
             def sample(delta):
                 return _one(f, scan, m, heights, u, probe, delta, fcfg)
 
-            draws = jax.lax.map(sample, deltas, batch_size=chunk)
-            for o in fwd_outputs:
-                mc[o] = _mc_stats(draws[o], value[o], o)
-            if need_los:
-                los_s = draws["los"] + noise * jax.random.normal(k2, draws["los"].shape, dtype)
-                inv_s = _inverse_fn(table)(los_s)
-                for o in inv_outputs:
-                    mc[o] = _mc_stats(inv_s[o], value[o], o)
+            mc = _monte_carlo(sample, value, k, chol, n_mc, chunk, p, fwd_outputs,
+                              inv_outputs, table, noise, dtype)
         return value, jac, mc
 
-    field_axis, mount_axis, uref_axis = axes
-    if field_axis is None and mount_axis is None and uref_axis is None:
-        value, jac, mc = per_sector(field, mount, u_ref, key)
-    else:
-        n = _sector_count(field, mount, u_ref, axes)
-        keys = jax.random.split(key, n)
-        grid = isinstance(field, GridField) and field_axis == 0
-
-        def one(field_leaf, m, u, k):
-            f = unstack_field(field, field_leaf) if grid else field_leaf
-            return per_sector(f, m, u, k)
-
-        batched = field.velocity if grid else field
-        value, jac, mc = jax.vmap(one, in_axes=(field_axis, mount_axis, uref_axis, 0))(
-            batched, mount, u_ref, keys)
+    value, jac, mc = _over_sectors(per_sector, field, mount, u_ref, key, axes)
     hess = value.pop("_hess", None)
     if need_los and "los" not in outputs:
         value.pop("los")
         jac.pop("los")
-    cov = cov.astype(dtype)
-    std_in = std_in.astype(dtype)
-    if need_los:  # the record noise: one more input, the LOS error of every beam (i.i.d.)
-        cov = jnp.zeros((p + 1, p + 1), dtype).at[:p, :p].set(cov).at[p, p].set(noise**2)
-        std_in = jnp.concatenate([std_in, noise[None]])
-    std, contribution, share = {}, {}, {}
-    for o in outputs:
-        j = jac[o]
-        if need_los and o not in _INVERSE_OUTPUTS:  # the forward outputs see no record noise
-            j = jnp.concatenate([j, jnp.zeros(j.shape[:-1] + (1,), j.dtype)], axis=-1)
-        jac[o] = j
-        std[o], contribution[o], share[o] = _budget(j, cov, std_in)
-    second = {}
-    if hess is not None:  # Gaussian inputs: var(J d + d^T H d / 2) = J C J^T + tr((H C)^2) / 2
-        c = cov[:p, :p]
-        for o in fwd_outputs:
-            hc = jnp.einsum("...ij,jk->...ik", jnp.where(jnp.isfinite(hess[o]), hess[o], 0.0), c,
-                            precision=HIGHEST)
-            var2 = 0.5 * jnp.einsum("...ij,...ji->...", hc, hc, precision=HIGHEST)
-            second[o] = jnp.sqrt(jnp.maximum(var2, 0.0))
+    std, contribution, share, cov = _gum(outputs, jac, cov, std_in, noise, need_los, p, dtype)
+    second = {} if hess is None else _second_order_std(hess, cov, p, fwd_outputs)
     return value, jac, std, contribution, share, mc, second
 
 

@@ -32,7 +32,13 @@ from pathlib import Path
 import numpy as np
 
 from ..io.layout import read_farm
-from ..workflows.farm_study import FARM_SCANS, check_lidar_position, farm_study, write_farm_study
+from ..workflows.farm_study import (
+    FARM_SCANS,
+    FarmStudyConfig,
+    check_lidar_position,
+    farm_study,
+    write_farm_study,
+)
 from ._common import finite_float, positive_float
 
 SCANS = FARM_SCANS
@@ -140,11 +146,12 @@ def run(args) -> int:
     if args.heights is not None and (not args.heights or any(not (h > 0) for h in args.heights)):
         raise ValueError(f"--heights must be positive metres, got {args.heights}")
 
-    study = farm_study(
-        lay, lidar=args.lidar, nacelle=args.nacelle, backward=args.backward, scan=scan_name,
+    config = FarmStudyConfig(
+        lidar=args.lidar, nacelle=args.nacelle, backward=args.backward, scan=scan_name,
         cone_angle=args.cone_angle, heights=args.heights, directions=args.directions,
         speed=args.speed, shear=args.shear, model=args.model, combination=args.combination,
         expansion=args.expansion, yaw=yaw, probe=args.probe, map_direction=args.map_direction)
+    study = farm_study(lay, config=config)
     study = dataclasses.replace(study, layouts=tuple(args.layouts))
     write_farm_study(out, study)
     n_dist = int(study.disturbed.sum())

@@ -1,18 +1,9 @@
 """Frozen turbulence: a mean field plus a turbulence box advected with the wind (Taylor).
 
-A `TurbulenceBox` holds velocity fluctuations on a regular grid in the **box frame**:
-
-- ``x`` along the mean wind (downwind), ``z`` up, ``y = z x x`` lateral, to the *left* when
-  looking downwind (right-handed; Mann 1994, hipersim, TurbSim and HAWC2 all use these
-  directions for ``u, v, w``);
-- node ``(i, j, k)`` sits at ``(i dx, (j - (ny - 1)/2) dy, k dz)``: laterally centred,
-  vertically from the box's bottom row;
-- ``velocity[i, j, k] = (u', v', w')`` in m/s along those axes.
-
-The box is a *spatial* field (a snapshot of the fluctuations), periodic along ``x`` with period
-``Lx = nx dx``: that is how FFT generators (Mann, TurbSim) make it. Laterally and vertically it
-is periodic (period ``ny dy``, ``nz dz``) when the generator made it so (`periodic`), else it
-covers the nodes only and points outside give NaN (never a clamped value).
+A `lidarjax.TurbulenceBox` holds velocity fluctuations ``(u', v', w')`` (m/s) on a regular
+grid in the box frame that `lidarjax.turbulence` describes: ``x`` downwind, ``y`` lateral to
+the left looking downwind, ``z`` up; periodic along ``x``, and laterally and vertically only
+when its generator made it so (else NaN outside the nodes).
 
 `FrozenTurbulence` adds the box to any mean field (a `GridField` or a scene) under Taylor's
 hypothesis. With ``e_x`` the unit vector the wind blows towards (meteorological `direction`,

@@ -14,7 +14,8 @@
 - `series_run`: the field of a simulated series: frozen turbulence over a mean flow
   (`series_field`, `mean_wind_above`).
 - `series_report`: a simulated series' ``.sta``, statistics CSV and figure.
-- `farm_study`: a lidar in a wind farm over many directions (`farm_study` -> `FarmStudy`:
+- `farm_study`: a lidar in a wind farm over many directions (`farm_study`, configured by
+  `FarmStudyConfig` -> `FarmStudy`:
   wakes, correction factors, IEC disturbed sectors, yaw gradients, response table,
   `farm_monitor_points`; `write_farm_study`: the files of ``lidarjax farm``).
 - `demo`: the built-in job of ``lidarjax demo`` (`run_demo`).

@@ -70,7 +70,7 @@ from ..scan import Scan
 from ..scenes.farm import WindFarm, nacelle_mount
 from .monitor_points import monitor_points
 
-__all__ = ["FarmStudy", "farm_study", "write_farm_study", "farm_monitor_points",
+__all__ = ["FarmStudy", "FarmStudyConfig", "farm_study", "write_farm_study", "farm_monitor_points",
            "check_lidar_position", "FARM_SCANS"]
 
 #: The scans `farm_study` builds by name (ground lidars, then nacelle lidars).
@@ -250,40 +250,15 @@ def _scan(scan, cone_angle, nacelle: bool) -> tuple[Scan, str]:
 
 
 # ------------------------------------------------------------------------------ study
-def farm_study(
-    farm: WindFarm | FarmLayout | PathLike | Sequence[PathLike],
-    turbines: PathLike | Sequence[PathLike] | None = None,
-    *,
-    lidar: Sequence[float] | None = None,
-    nacelle: str | None = None,
-    backward: bool = False,
-    scan: str | Scan | None = None,
-    cone_angle: float | None = None,
-    heights: Sequence[float] | None = None,
-    directions: Sequence[float] = tuple(range(0, 360, 2)),
-    speed: float | None = None,
-    shear: float | None = None,
-    model: str | None = None,
-    combination: str | None = None,
-    expansion: float | None = None,
-    yaw: Mapping[str, float] | Sequence[float] | None = None,
-    probe: AbstractProbe | str | None = "pulsed",
-    map_direction: float | None = None,
-    names: Sequence[str] | None = None,
-) -> FarmStudy:
-    """Simulate a lidar in a wind farm's wakes for every inflow direction.
+@dataclasses.dataclass(frozen=True)
+class FarmStudyConfig:
+    """What `farm_study` simulates besides the farm: the lidar, its scan and heights, the
+    directions, the wake model and the probe. Every field has a default except the lidar
+    (`lidar` or `nacelle`, exactly one).
 
-    **Arguments:**
-
-    - `farm`: a `lidarjax.io.FarmLayout` (`lidarjax.io.read_farm`), the path(s) of seed 004
-      layout files (then `turbines` gives the turbine type file(s): one for all or one per
-      layout), or a `lidarjax.scenes.WindFarm` (then its speed, shear, wake model,
-      combination, expansion and yaw are used; `names` names its turbines, default ``T0``,
-      ``T1``, ...).
     - `lidar`: a ground lidar's ``(x, y, z)``, absolute metres (z above the ground datum);
       or `nacelle`: the name of the turbine carrying a nacelle lidar (at its hub, yawed with
-      it, looking upstream; ``backward=True`` looks downstream into its own wake). Exactly
-      one of them.
+      it, looking upstream; ``backward=True`` looks downstream into its own wake).
     - `scan`: a name of `FARM_SCANS` (default ``windcube_v2`` on the ground,
       ``nacelle_2beam`` on a nacelle; `cone_angle` in degrees overrides the scan's cone or
       half-angle) or a `lidarjax.Scan`.
@@ -294,57 +269,176 @@ def farm_study(
     - `speed` (free stream at hub height, m/s, default 10), `shear` (power-law exponent,
       default 0), `model` (``"gaussian"``, default, or ``"top_hat"``), `combination`
       (``"sum_of_squares"``, default, ``"linear"`` or ``"max"``), `expansion` (wake
-      expansion k; default the model's): the wake model (`lidarjax.scenes.wind_farm`).
-    - `yaw`: yaw misalignments in degrees, ``{name: degrees}`` or one per turbine.
+      expansion k; default the model's): the wake model (`lidarjax.scenes.wind_farm`), for a
+      farm given as a layout (a `lidarjax.scenes.WindFarm` carries its own).
+    - `yaw`: yaw misalignments in degrees, ``{name: degrees}`` or one per turbine (layouts
+      only, like the wake model).
     - `probe`: ``"pulsed"`` (default), ``"cw"``, ``"point"`` / None, or a probe.
     - `map_direction`: the direction of the map and of the monitor points (default: the
       direction with the largest speed correction at the first height).
+    - `names`: the turbines' names of a `WindFarm` (default ``T0``, ``T1``, ...).
+    """
+
+    lidar: Sequence[float] | None = None
+    nacelle: str | None = None
+    backward: bool = False
+    scan: str | Scan | None = None
+    cone_angle: float | None = None
+    heights: Sequence[float] | None = None
+    directions: Sequence[float] = tuple(range(0, 360, 2))
+    speed: float | None = None
+    shear: float | None = None
+    model: str | None = None
+    combination: str | None = None
+    expansion: float | None = None
+    yaw: Mapping[str, float] | Sequence[float] | None = None
+    probe: AbstractProbe | str | None = "pulsed"
+    map_direction: float | None = None
+    names: Sequence[str] | None = None
+
+
+def farm_study(
+    farm: WindFarm | FarmLayout | PathLike | Sequence[PathLike],
+    turbines: PathLike | Sequence[PathLike] | None = None,
+    config: FarmStudyConfig | None = None,
+    **options,
+) -> FarmStudy:
+    """Simulate a lidar in a wind farm's wakes for every inflow direction.
+
+    **Arguments:**
+
+    - `farm`: a `lidarjax.io.FarmLayout` (`lidarjax.io.read_farm`), the path(s) of seed 004
+      layout files (then `turbines` gives the turbine type file(s): one for all or one per
+      layout), or a `lidarjax.scenes.WindFarm` (then its speed, shear, wake model,
+      combination, expansion and yaw are used; `names` names its turbines).
+    - `config`: a `FarmStudyConfig` (the lidar, scan, heights, directions, wake model,
+      probe and map direction; units there).
+    - `options`: `FarmStudyConfig` fields given as keywords (``lidar=(x, y, z)``,
+      ``nacelle="T001"``, ``directions=...``, ...); they replace those of `config`.
 
     **Returns:** a `FarmStudy`. Raises `ValueError` (one line) for a lidar inside or under a
     rotor (`check_lidar_position`), unknown turbine names, a scan of the other kind of lidar,
     or non-positive speeds and heights.
     """
 
+    cfg = dataclasses.replace(config or FarmStudyConfig(), **options)
+    lay, layouts, base = _resolved_farm(farm, turbines, cfg)
+    plan = _plan(lay, base, cfg)
+    farm, plan = _farm_at(lay, base, plan)
+    sims_all, grad_yaw = _sweep(farm, plan)
+    sims = jax.tree_util.tree_map(lambda a: a[: plan.dirs.size], sims_all)
+    origin = np.asarray(farm.origin, np.float64) + np.asarray(farm.origin_lo, np.float64)
+    ratio = np.asarray(sims.cff_U, np.float64)
+    ldir = np.asarray(sims.lidar_direction, np.float64)
+    misalignment = None
+    if plan.k_nac is not None:
+        # a nacelle lidar reports (north=True) true directions; its yaw misalignment is the
+        # reported direction minus the bearing its axis points to (rotor heading, +180 backward)
+        axis = plan.dirs - plan.yaw_deg[plan.k_nac] + (180.0 if plan.backward else 0.0)
+        misalignment = np.mod(ldir - axis[:, None] + 180.0, 360.0) - 180.0
+        location = np.asarray(farm.hub_points()[plan.k_nac], np.float64) + origin
+    else:
+        location = plan.lidar
+    secs = disturbed_sectors(location[:2], lay.easting, lay.northing, lay.diameter,
+                             plan.names)
+    merged = merge_sectors(secs)
+    k_map = int(np.nanargmax(np.abs(ratio[:, 0] - 1.0))) if cfg.map_direction is None else None
+    map_dir = float(plan.dirs[k_map]) if k_map is not None else float(cfg.map_direction)
+    f_map, m_map = _farm_and_mount(farm, plan, map_dir)
+    pts_abs = np.asarray(sims_all.points[k_map if k_map is not None else -1], np.float64)
+    m_loc = np.asarray(m_map.location, np.float64) + np.asarray(m_map.location_lo, np.float64)
+    lidar_local = m_loc - origin
+    beams = np.stack([np.broadcast_to(lidar_local[:2], pts_abs[-1, :, :2].shape),
+                      pts_abs[-1, :, :2] - origin[:2]], 1)
+    points = farm_monitor_points(f_map, plan.scan, m_map, plan.heights, plan.probe,
+                                 names=plan.names)
+    table = (ResponseTable.from_simulations(sims, mount=None, scan=plan.scan, probe=plan.probe)
+             if plan.dirs.size >= 3 else None)
+    return FarmStudy(
+        names=tuple(plan.names), directions=plan.dirs,
+        heights=np.asarray(plan.heights, np.float64),
+        lidar_speed=np.asarray(sims.lidar_speed, np.float64), lidar_direction=ldir,
+        speed_ratio=ratio, direction_addend=np.asarray(sims.cff_th, np.float64),
+        yaw_misalignment=misalignment, disturbed=np.asarray(in_sectors(plan.dirs, merged), bool),
+        sectors=tuple(secs), merged_sectors=tuple(merged), yaw_gradient=grad_yaw, table=table,
+        monitor_points=points, simulations=sims, map_direction=map_dir, map_index=k_map,
+        map_farm=f_map, map_lidar=np.asarray(lidar_local[:2]), map_beams=beams, farm=farm,
+        scan=plan.scan, scan_name=plan.scan_name, probe=plan.probe, nacelle=cfg.nacelle,
+        backward=bool(plan.backward), lidar_location=location, speed=plan.speed,
+        shear=float(plan.shear), model=plan.model, combination=plan.combination,
+        yaw=plan.yaw_deg, hub_height=np.asarray(lay.hub_height, np.float64), layouts=layouts)
+
+
+def _resolved_farm(farm, turbines, cfg: FarmStudyConfig):
+    """The farm as a `FarmLayout`, the layout files read (as given) and the `WindFarm` given
+    (None for a layout), checking that the options go with the kind of farm given."""
     if isinstance(farm, WindFarm):
         if turbines is not None:
             raise ValueError("farm_study: `turbines` goes with layout files, not a WindFarm")
-        given = {k: v for k, v in (("speed", speed), ("shear", shear), ("model", model),
-                                   ("combination", combination), ("expansion", expansion),
-                                   ("yaw", yaw)) if v is not None}
+        given = [k for k in ("speed", "shear", "model", "combination", "expansion", "yaw")
+                 if getattr(cfg, k) is not None]
         if given:
             raise ValueError(f"farm_study: {', '.join(given)} configure a farm built from a "
                              "layout; a WindFarm carries its own (change it with "
                              "equinox.tree_at or build it with the values wanted)")
-        lay, layouts, base = _layout_of(farm, names), (), farm
-    else:
-        if names is not None:
-            raise ValueError("farm_study: `names` goes with a WindFarm; a layout names its "
-                             "turbines")
-        if isinstance(farm, FarmLayout):
-            if turbines is not None:
-                raise ValueError("farm_study: `turbines` goes with layout files, not a "
-                                 "FarmLayout")
-            lay, layouts = farm, ()
-        else:
-            if turbines is None:
-                raise ValueError("farm_study: give the turbine type file(s) with `turbines=`")
-            paths = [farm] if isinstance(farm, str | Path) else list(farm)
-            lay, layouts = read_farm(paths, turbines), tuple(str(p) for p in paths)
-        base = None
+        return _layout_of(farm, cfg.names), (), farm
+    if cfg.names is not None:
+        raise ValueError("farm_study: `names` goes with a WindFarm; a layout names its "
+                         "turbines")
+    if isinstance(farm, FarmLayout):
+        if turbines is not None:
+            raise ValueError("farm_study: `turbines` goes with layout files, not a "
+                             "FarmLayout")
+        return farm, (), None
+    if turbines is None:
+        raise ValueError("farm_study: give the turbine type file(s) with `turbines=`")
+    paths = [farm] if isinstance(farm, str | Path) else list(farm)
+    return read_farm(paths, turbines), tuple(str(p) for p in paths), None
+
+
+@dataclasses.dataclass(frozen=True)
+class _Plan:
+    """`farm_study`'s checked configuration: turbine `names`, the nacelle lidar's turbine
+    index `k_nac` (None on the ground), the ground `lidar` ``(3,)`` and its mount `ground`,
+    `heights`, `dirs`,
+    the scan, probe and wake model, and `yaw_deg` ``(i,)``."""
+
+    names: list
+    k_nac: int | None
+    backward: bool
+    lidar: np.ndarray | None
+    ground: Mount | None
+    scan: Scan
+    scan_name: str
+    heights: list
+    dirs: np.ndarray
+    probe: AbstractProbe | None
+    yaw_deg: np.ndarray
+    speed: float
+    shear: float | None
+    model: str | None
+    combination: str | None
+    expansion: float | None
+    map_direction: float | None
+
+
+def _plan(lay: FarmLayout, base: WindFarm | None, cfg: FarmStudyConfig) -> _Plan:
+    """Check the configuration against the layout (before compiling anything)."""
     names = list(lay.names)
-    speed = 10.0 if speed is None else speed
+    speed = 10.0 if cfg.speed is None else cfg.speed
     if base is None and not (speed > 0 and np.isfinite(speed)):
         raise ValueError(f"farm_study: speed must be positive m/s, got {speed}")
-    yaw_deg = _yaw_vector(yaw, names) if base is None else np.asarray(base.yaw, np.float64)
+    yaw_deg = _yaw_vector(cfg.yaw, names) if base is None else np.asarray(base.yaw, np.float64)
+    nacelle, lidar = cfg.nacelle, cfg.lidar
     if (lidar is None) == (nacelle is None):
         raise ValueError("farm_study: give either lidar=(x, y, z) (a ground lidar) or "
                          "nacelle=NAME (a nacelle lidar)")
     is_nacelle = nacelle is not None
     if is_nacelle and nacelle not in names:
         raise ValueError(f"farm_study: no turbine named {nacelle!r} for the nacelle lidar")
-    if backward and not is_nacelle:
+    if cfg.backward and not is_nacelle:
         raise ValueError("farm_study: backward=True needs a nacelle lidar")
-    scan, scan_name = _scan(scan, cone_angle, is_nacelle)
+    scan, scan_name = _scan(cfg.scan, cfg.cone_angle, is_nacelle)
     if not is_nacelle:
         lidar = np.asarray(lidar, np.float64)
         if lidar.shape != (3,) or not np.all(np.isfinite(lidar)):
@@ -352,98 +446,83 @@ def farm_study(
                              f"{lidar.tolist()}")
         check_lidar_position(lay, lidar)
     k_nac = names.index(nacelle) if is_nacelle else None
+    heights = cfg.heights
     if heights is None:
         heights = ([2.5 * float(lay.diameter[k_nac])] if is_nacelle
                    else [float(np.mean(lay.hub_height))])
     heights = [float(h) for h in np.atleast_1d(np.asarray(heights, np.float64))]
     if not heights or any(not (h > 0 and np.isfinite(h)) for h in heights):
         raise ValueError(f"farm_study: heights must be positive metres, got {heights}")
-    dirs = np.atleast_1d(np.asarray(directions, np.float64))
+    dirs = np.atleast_1d(np.asarray(cfg.directions, np.float64))
     if dirs.ndim != 1 or dirs.size == 0 or not np.all(np.isfinite(dirs)):
         raise ValueError("farm_study: directions must be a non-empty 1-D array of finite "
                          "degrees")
     if np.unique(np.mod(np.round(dirs, 9), 360.0)).size != dirs.size:
         raise ValueError("farm_study: directions repeat modulo 360")
+    map_direction = cfg.map_direction
     if map_direction is not None and not np.isfinite(map_direction):
         raise ValueError(f"farm_study: map_direction must be finite degrees, got {map_direction}")
-    probe = _probe(probe)
+    return _Plan(names=names, k_nac=k_nac, backward=cfg.backward,
+                 lidar=None if is_nacelle else lidar,
+                 ground=None if is_nacelle else Mount(lidar), scan=scan, scan_name=scan_name,
+                 heights=heights, dirs=dirs, probe=_probe(cfg.probe), yaw_deg=yaw_deg,
+                 speed=speed, shear=cfg.shear, model=cfg.model, combination=cfg.combination,
+                 expansion=cfg.expansion, map_direction=map_direction)
 
+
+def _farm_at(lay: FarmLayout, base: WindFarm | None, plan: _Plan):
+    """The `WindFarm` at the first direction (built from the layout, or the one given) and
+    `plan` completed with the wake model it has (speed, shear, model, combination)."""
+    dirs = plan.dirs
     if base is None:
-        model = model or "gaussian"
-        combination = combination or "sum_of_squares"
-        shear = 0.0 if shear is None else shear
-        farm = lay.to_farm(speed=speed, direction=float(dirs[0]), alpha=shear, model=model,
-                           combination=combination, expansion=expansion, yaw=yaw_deg)
+        model = plan.model or "gaussian"
+        combination = plan.combination or "sum_of_squares"
+        shear = 0.0 if plan.shear is None else plan.shear
+        farm = lay.to_farm(speed=plan.speed, direction=float(dirs[0]), alpha=shear,
+                           model=model, combination=combination, expansion=plan.expansion,
+                           yaw=plan.yaw_deg)
+        speed = plan.speed
     else:
         farm = eqx.tree_at(lambda g: g.direction, base, jnp.asarray(dirs[0], base.dtype))
         speed, shear = float(base.speed), float(base.alpha)
         model, combination = base.model, base.combination
-    speed = float(speed)
-    origin = np.asarray(farm.origin, np.float64) + np.asarray(farm.origin_lo, np.float64)
-    hts = jnp.asarray(heights, farm.dtype)
-    ground = None if is_nacelle else Mount(lidar)
+    return farm, dataclasses.replace(plan, speed=float(speed), shear=shear, model=model,
+                                     combination=combination)
 
-    def at(direction, yaw_deg=None):
-        f = eqx.tree_at(lambda g: g.direction, farm, jnp.asarray(direction, farm.dtype))
-        if yaw_deg is not None:
-            f = eqx.tree_at(lambda g: g.yaw, f, yaw_deg)
-        m = nacelle_mount(f, k_nac, backward=backward, north=True) if is_nacelle else ground
-        return f, m
+
+def _farm_and_mount(farm: WindFarm, plan: _Plan, direction, yaw_deg=None):
+    """The farm turned to `direction` (and yawed to `yaw_deg` when given) and the lidar's
+    mount in it (a nacelle lidar's follows its turbine)."""
+    f = eqx.tree_at(lambda g: g.direction, farm, jnp.asarray(direction, farm.dtype))
+    if yaw_deg is not None:
+        f = eqx.tree_at(lambda g: g.yaw, f, yaw_deg)
+    if plan.k_nac is not None:
+        return f, nacelle_mount(f, plan.k_nac, backward=plan.backward, north=True)
+    return f, plan.ground
+
+
+def _sweep(farm: WindFarm, plan: _Plan):
+    """The simulations of every direction (and of the map direction when given, last) in
+    one batch, and d(lidar speed at the first height)/d(yaw) ``(d, i)`` by `jax.grad`."""
+    dirs, scan, probe = plan.dirs, plan.scan, plan.probe
+    hts = jnp.asarray(plan.heights, farm.dtype)
 
     def reading(direction, yaw_deg):
-        f, m = at(direction, yaw_deg)
+        f, m = _farm_and_mount(farm, plan, direction, yaw_deg)
         return simulate(f, scan, m, hts, probe=probe, point_reference=False).lidar_speed[0]
 
-    run_dirs = dirs if map_direction is None else np.append(dirs, map_direction)
-    stacked = jax.vmap(lambda d: at(d)[0])(jnp.asarray(run_dirs, farm.dtype))
-    mounts = jax.vmap(lambda f: nacelle_mount(f, k_nac, backward=backward, north=True))(stacked) \
-        if is_nacelle else ground
-    u_refs = speed * np.stack([np.asarray(heading(d)) for d in run_dirs])
+    run_dirs = dirs if plan.map_direction is None else np.append(dirs, plan.map_direction)
+    stacked = jax.vmap(lambda d: _farm_and_mount(farm, plan, d)[0])(
+        jnp.asarray(run_dirs, farm.dtype))
+    mounts = jax.vmap(lambda f: nacelle_mount(f, plan.k_nac, backward=plan.backward,
+                                              north=True))(stacked) \
+        if plan.k_nac is not None else plan.ground
+    u_refs = plan.speed * np.stack([np.asarray(heading(d)) for d in run_dirs])
     sims_all = simulate_rotations(stacked, scan, mounts, hts, u_refs=u_refs, probe=probe,
                                   point_reference=False)
-    sims = jax.tree_util.tree_map(lambda a: a[: dirs.size], sims_all)
     grad_yaw = np.asarray(jax.jit(jax.vmap(jax.grad(reading, argnums=1), in_axes=(0, None)))(
         jnp.asarray(dirs, farm.dtype), farm.yaw), np.float64)
-
-    ratio = np.asarray(sims.cff_U, np.float64)
-    addend = np.asarray(sims.cff_th, np.float64)
-    lspeed = np.asarray(sims.lidar_speed, np.float64)
-    ldir = np.asarray(sims.lidar_direction, np.float64)
-    misalignment = None
-    if is_nacelle:
-        # a nacelle lidar reports (north=True) true directions; its yaw misalignment is the
-        # reported direction minus the bearing its axis points to (rotor heading, +180 backward)
-        axis = dirs - yaw_deg[k_nac] + (180.0 if backward else 0.0)
-        misalignment = np.mod(ldir - axis[:, None] + 180.0, 360.0) - 180.0
-
-    hub_abs = np.asarray(farm.hub_points()[k_nac], np.float64) + origin if is_nacelle else None
-    loc_xy = hub_abs[:2] if is_nacelle else lidar[:2]
-    secs = disturbed_sectors(loc_xy, lay.easting, lay.northing, lay.diameter, names)
-    merged = merge_sectors(secs)
-    disturbed = np.asarray(in_sectors(dirs, merged), bool)
-
-    k_map = int(np.nanargmax(np.abs(ratio[:, 0] - 1.0))) if map_direction is None else None
-    map_dir = float(dirs[k_map]) if k_map is not None else float(map_direction)
-    f_map, m_map = at(map_dir)
-    pts_abs = np.asarray(sims_all.points[k_map if k_map is not None else -1], np.float64)
-    m_loc = np.asarray(m_map.location, np.float64) + np.asarray(m_map.location_lo, np.float64)
-    lidar_local = m_loc - origin
-    beams = np.stack([np.broadcast_to(lidar_local[:2], pts_abs[-1, :, :2].shape),
-                      pts_abs[-1, :, :2] - origin[:2]], 1)
-    points = farm_monitor_points(f_map, scan, m_map, heights, probe, names=names)
-    table = (ResponseTable.from_simulations(sims, mount=None, scan=scan, probe=probe)
-             if dirs.size >= 3 else None)
-    return FarmStudy(
-        names=tuple(names), directions=dirs, heights=np.asarray(heights, np.float64),
-        lidar_speed=lspeed, lidar_direction=ldir, speed_ratio=ratio, direction_addend=addend,
-        yaw_misalignment=misalignment, disturbed=disturbed, sectors=tuple(secs),
-        merged_sectors=tuple(merged), yaw_gradient=grad_yaw, table=table,
-        monitor_points=points, simulations=sims, map_direction=map_dir, map_index=k_map,
-        map_farm=f_map, map_lidar=np.asarray(lidar_local[:2]), map_beams=beams, farm=farm,
-        scan=scan, scan_name=scan_name, probe=probe, nacelle=nacelle, backward=bool(backward),
-        lidar_location=hub_abs if is_nacelle else lidar, speed=speed, shear=float(shear),
-        model=model, combination=combination, yaw=yaw_deg,
-        hub_height=np.asarray(lay.hub_height, np.float64), layouts=layouts)
+    return sims_all, grad_yaw
 
 
 def farm_monitor_points(farm: WindFarm, scan: Scan, mount: Mount, heights, probe=None, *,

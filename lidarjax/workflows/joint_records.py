@@ -9,20 +9,17 @@ A table without a profile axis (a `ResponseTable`) falls back to the per-height
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
-from ..angles import horizontal_speed, wind_direction
 from ..inverse import JointInversion, invert_joint, invert_joint_reconstructed
 from ..response import ProfileTable, ResponseTable
 from .records import (
     DEFAULT_MIN_AVAILABILITY,
     CorrectedRecords,
-    _homogeneous,
+    _matched_records,
+    _rtd_los,
     correct_records,
-    load_records,
-    match_heights,
     subset_table,
 )
 
@@ -66,13 +63,8 @@ def correct_records_joint(table, path, *, noise: float | None = None, records=No
     if not isinstance(table, ProfileTable):
         raise ValueError(f"correct_records_joint: `table` must be a ProfileTable, got "
                          f"{type(table).__name__}")
-    rec = records if records is not None else load_records(
-        path, cnr_threshold=cnr_threshold, min_availability=min_availability)
-    if noise is not None and not (math.isfinite(float(noise)) and float(noise) > 0):
-        raise ValueError(f"noise must be a finite positive number (m/s), got {noise}")
-    if table.heights is None:
-        raise ValueError("the response table has no heights; rebuild it with lidarjax table")
-    ti, ri, record_only, table_only = match_heights(table.heights, rec.heights)
+    rec, ti, ri, record_only, table_only = _matched_records(
+        table, path, records, noise, cnr_threshold, min_availability)
     if ti.size < 2:
         raise ValueError(f"{rec.path}: the joint inversion needs at least two heights shared by "
                          f"the table and the record, found {ti.size}")
@@ -81,13 +73,7 @@ def correct_records_joint(table, path, *, noise: float | None = None, records=No
     dtype = np.asarray(sub.response).dtype
     noise_arr = None if noise is None else np.full((n, h), float(noise), dtype)
     if rec.kind == "rtd":
-        if sub.n_beams > rec.los.shape[-1]:
-            raise ValueError(f"{rec.path}: the table has {sub.n_beams} beams, the record "
-                             f"{rec.los.shape[-1]}")
-        los = np.asarray(rec.los[:, ri, : sub.n_beams], dtype)
-        homog = _homogeneous(los, None if sub.beam_vectors is None
-                             else np.asarray(sub.beam_vectors))
-        measured = (np.asarray(horizontal_speed(homog)), np.asarray(wind_direction(homog)))
+        los, measured = _rtd_los(rec, ri, sub, dtype)
         joint = invert_joint(sub, los, noise=noise_arr)
     else:
         speed = np.asarray(rec.speed[:, ri], dtype)

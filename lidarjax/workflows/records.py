@@ -377,14 +377,8 @@ def correct_records(
     Pass an already loaded `records` to skip reading `path`.
     """
 
-    anisotropic = None
-    rec = records if records is not None else load_records(
-        path, cnr_threshold=cnr_threshold, min_availability=min_availability)
-    if noise is not None and not (math.isfinite(float(noise)) and float(noise) > 0):
-        raise ValueError(f"noise must be a finite positive number (m/s), got {noise}")
-    if table.heights is None:
-        raise ValueError("the response table has no heights; rebuild it with lidarjax table")
-    ti, ri, record_only, table_only = match_heights(table.heights, rec.heights)
+    rec, ti, ri, record_only, table_only = _matched_records(
+        table, path, records, noise, cnr_threshold, min_availability)
     if ti.size == 0:
         raise ValueError(
             f"{rec.path}: none of the table's heights "
@@ -393,17 +387,10 @@ def correct_records(
             "record's heights (lidarjax table --heights-from RECORDS)")
     sub = subset_table(table, ti)
     n, h = rec.time.size, ti.size
-    dtype = np.asarray(table.response).dtype
-    flags_rec = rec.flags[:, ri]
+    anisotropic = None
     if rec.kind == "rtd":
-        if sub.n_beams > rec.los.shape[-1]:
-            raise ValueError(f"{rec.path}: the table has {sub.n_beams} beams, the record "
-                             f"{rec.los.shape[-1]}")
-        los = rec.los[:, ri, : sub.n_beams]
+        los, measured = _rtd_los(rec, ri, sub)
         data = (los,)
-        vectors = np.asarray(sub.beam_vectors) if sub.beam_vectors is not None else None
-        homog = _homogeneous(los, vectors)
-        measured = (np.asarray(horizontal_speed(homog)), np.asarray(wind_direction(homog)))
         noise_arr = None if noise is None else np.full((n, h), float(noise))
     else:
         speed, direction = rec.speed[:, ri], rec.direction[:, ri]
@@ -412,23 +399,76 @@ def correct_records(
         if noise is not None:
             noise_arr = np.full((n, h), float(noise))
         elif rec.speed_std is not None:
-            period = rec.period_s if rec.period_s > 0 else 600.0
-            sp = scan_period_s or SCAN_PERIOD_S.get(rec.instrument or (
-                "zephir" if rec.kind == "zephir" else "windcube_v2"), 5.0)
-
-            def pick(a):
-                return None if a is None else np.asarray(a)[:, ri]
-
-            along, cross = reported_noise(speed, pick(rec.speed_std),
-                                          availability=pick(rec.availability),
-                                          direction_std=pick(rec.direction_std),
-                                          n_samples=pick(rec.n_samples), period_s=period,
-                                          scan_period_s=sp)
             # invert with unit noise, then scale speed_std along and direction_std across
-            anisotropic = (along, cross)
-            noise_arr = np.where(np.isfinite(along), 1.0, np.nan)
+            anisotropic = _reported_noise(rec, ri, speed, scan_period_s)
+            noise_arr = np.where(np.isfinite(anisotropic[0]), 1.0, np.nan)
         else:
             noise_arr = None
+    show = _progress(f"correcting {Path(rec.path).name}", progress)
+    out = _invert_in_chunks(sub, rec.kind, data, noise_arr, chunk_records, show)
+    if anisotropic is not None:
+        out["speed_std"] *= anisotropic[0]
+        out["direction_std"] *= anisotropic[1]
+        out["noise"] = np.where(np.isfinite(out["noise"]), anisotropic[0], np.nan)
+    avail = None if rec.availability is None else np.asarray(rec.availability)[:, ri]
+    return CorrectedRecords(
+        kind=rec.kind, time=np.asarray(rec.time),
+        heights=np.asarray(rec.heights, np.float64)[ri],
+        measured_speed=np.asarray(measured[0], np.float64),
+        measured_direction=np.asarray(measured[1], np.float64),
+        availability=avail, record_flags=np.asarray(rec.flags[:, ri], np.int64),
+        record_only_heights=tuple(record_only), table_only_heights=tuple(table_only),
+        warnings=rec.warnings, **out)
+
+
+def _matched_records(table, path, records, noise, cnr_threshold, min_availability):
+    """The records (`records`, or `path` read) and the heights both they and `table` have
+    (`match_heights`), after checking `noise` and that the table knows its heights."""
+    rec = records if records is not None else load_records(
+        path, cnr_threshold=cnr_threshold, min_availability=min_availability)
+    if noise is not None and not (math.isfinite(float(noise)) and float(noise) > 0):
+        raise ValueError(f"noise must be a finite positive number (m/s), got {noise}")
+    if table.heights is None:
+        raise ValueError("the response table has no heights; rebuild it with lidarjax table")
+    ti, ri, record_only, table_only = match_heights(table.heights, rec.heights)
+    return rec, ti, ri, record_only, table_only
+
+
+def _rtd_los(rec, ri, sub, dtype=None):
+    """Raw LOS records ``(r, h, b)`` at the record heights `ri` and the table's beams (cast
+    to `dtype` when given) and the homogeneous-flow speed and direction they give."""
+    if sub.n_beams > rec.los.shape[-1]:
+        raise ValueError(f"{rec.path}: the table has {sub.n_beams} beams, the record "
+                         f"{rec.los.shape[-1]}")
+    los = rec.los[:, ri, : sub.n_beams]
+    if dtype is not None:
+        los = np.asarray(los, dtype)
+    vectors = np.asarray(sub.beam_vectors) if sub.beam_vectors is not None else None
+    homog = _homogeneous(los, vectors)
+    return los, (np.asarray(horizontal_speed(homog)), np.asarray(wind_direction(homog)))
+
+
+def _reported_noise(rec, ri, speed, scan_period_s):
+    """The noise along and across the reported wind ``(r, h)`` (m/s) from the record's own
+    dispersion and availability (`reported_noise`)."""
+    period = rec.period_s if rec.period_s > 0 else 600.0
+    sp = scan_period_s or SCAN_PERIOD_S.get(rec.instrument or (
+        "zephir" if rec.kind == "zephir" else "windcube_v2"), 5.0)
+
+    def pick(a):
+        return None if a is None else np.asarray(a)[:, ri]
+
+    return reported_noise(speed, pick(rec.speed_std), availability=pick(rec.availability),
+                          direction_std=pick(rec.direction_std),
+                          n_samples=pick(rec.n_samples), period_s=period, scan_period_s=sp)
+
+
+def _invert_in_chunks(sub, kind, data, noise_arr, chunk_records, show):
+    """`invert` (raw LOS, ``kind == "rtd"``) or `invert_reconstructed` of the records
+    ``data`` in chunks of one compiled shape (the last padded with NaN records); records
+    without a usable noise level get NaN uncertainties and `NO_NOISE_ESTIMATE`."""
+    dtype = np.asarray(sub.response).dtype
+    n, h = data[0].shape[:2]
     out = {k: np.empty((n, h), np.float64) for k in ("speed", "direction", "speed_std",
                                                       "direction_std", "noise")}
     out["converged"] = np.zeros((n, h), bool)
@@ -436,7 +476,6 @@ def correct_records(
     # chunk shape: a power of two >= 64 (files of similar length share one compilation, in
     # this process and in the persistent cache), at most chunk_records
     size = max(1, min(int(chunk_records), max(64, 1 << max(n - 1, 0).bit_length())))
-    show = _progress(f"correcting {Path(rec.path).name}", progress)
     show(0, n)
     for s in range(0, n, size):
         part = [np.asarray(a[s:s + size], dtype) for a in data]
@@ -451,7 +490,7 @@ def correct_records(
             # records without a usable noise level get a placeholder (their std is NaN below)
             no_noise = ~(npart > 0)
             npart = np.where(no_noise, 1.0, npart)
-        if rec.kind == "rtd":
+        if kind == "rtd":
             inv = invert(sub, part[0], noise=npart)
         else:
             inv = invert_reconstructed(sub, part[0], part[1], noise=npart)
@@ -465,19 +504,7 @@ def correct_records(
 
             out["flags"][s:s + m] |= np.where(nn & conv, int(InverseFlag.NO_NOISE_ESTIMATE), 0)
         show(min(n, s + size), n)
-    if anisotropic is not None:
-        out["speed_std"] *= anisotropic[0]
-        out["direction_std"] *= anisotropic[1]
-        out["noise"] = np.where(np.isfinite(out["noise"]), anisotropic[0], np.nan)
-    avail = None if rec.availability is None else np.asarray(rec.availability)[:, ri]
-    return CorrectedRecords(
-        kind=rec.kind, time=np.asarray(rec.time),
-        heights=np.asarray(rec.heights, np.float64)[ri],
-        measured_speed=np.asarray(measured[0], np.float64),
-        measured_direction=np.asarray(measured[1], np.float64),
-        availability=avail, record_flags=np.asarray(flags_rec, np.int64),
-        record_only_heights=tuple(record_only), table_only_heights=tuple(table_only),
-        warnings=rec.warnings, **out)
+    return out
 
 
 # ------------------------------------------------------------------------------------------

@@ -181,6 +181,18 @@ def test_errors_before_computing(case, kwargs, message):
     root, layout, turbine, _ = case
     with pytest.raises(ValueError, match=message):
         farm_study(layout, turbine, **kwargs)
+    # the same study given as a FarmStudyConfig, and as a config the keywords complete
+    with pytest.raises(ValueError, match=message):
+        farm_study(layout, turbine, config=lj.FarmStudyConfig(**kwargs))
+    first, *rest = kwargs.items()
+    with pytest.raises(ValueError, match=message):
+        farm_study(layout, turbine, lj.FarmStudyConfig(**dict([first])), **dict(rest))
+
+
+def test_farm_study_options_are_the_config_fields(case):
+    root, layout, turbine, _ = case
+    with pytest.raises(TypeError, match="lidar_position"):
+        farm_study(layout, turbine, lidar_position=LIDAR)
 
 
 def test_check_lidar_position(case):
