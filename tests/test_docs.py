@@ -1,11 +1,8 @@
 """The documentation is tested: the site builds with ``mkdocs build --strict`` (a broken link
 or a missing API reference fails), every public name has an entry in the built site's
 ``objects.inv``, the generated pages (command line, benchmarks) equal what their scripts
-write now, ``__all__`` lists exactly what each package exports, ``lidarjax --version`` is
-the package's version, and every Python code block of ``docs/`` runs.
-
-A code block that must not run is preceded by a line ``<!-- not run: REASON -->``; the
-reason is required.
+write now, ``__all__`` lists exactly what each package exports, and ``lidarjax --version`` is
+the package's version. The code blocks of ``docs/`` run in tests/test_docs_examples.py.
 """
 
 from __future__ import annotations
@@ -13,7 +10,6 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 import os
-import re
 import subprocess
 import sys
 import types
@@ -112,45 +108,3 @@ def test_every_public_name_is_in_objects_inv(site):
             if not (here or top):
                 missing.append(f"{pkg}.{n}")
     assert not missing, f"no API entry for {missing}: add a ::: block to a page in docs/api/"
-
-
-def _python_blocks(text: str):
-    """``(line, code, reason)`` of each python fence; reason is None when it runs."""
-    lines = text.splitlines()
-    out = []
-    i = 0
-    while i < len(lines):
-        if lines[i].strip() == "```python":
-            start = i
-            j = i + 1
-            while lines[j].strip() != "```":
-                j += 1
-            prev = next((lines[k] for k in range(start - 1, -1, -1) if lines[k].strip()), "")
-            m = re.match(r"\s*<!-- not run: (.+?) -->", prev)
-            out.append((start + 1, "\n".join(lines[start + 1:j]), m.group(1) if m else None))
-            i = j
-        i += 1
-    return out
-
-
-GENERATED = {"cli.md", "benchmarks.md"}
-PAGES = sorted(p for p in DOCS.rglob("*.md") if p.name not in GENERATED and "data" not in p.parts)
-
-
-@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(DOCS)))
-def test_code_blocks_run(page, tmp_path, monkeypatch):
-    """Each page's blocks run in order in one namespace (a later block uses an earlier
-    block's names), in a temporary working folder that sees the clone's ``docs/`` and
-    ``tests/`` (the pages read the committed files as a reader does from a clone's root)."""
-    blocks = _python_blocks(page.read_text())
-    if not blocks:
-        return
-    for name in ("docs", "tests"):
-        (tmp_path / name).symlink_to(ROOT / name)
-    monkeypatch.chdir(tmp_path)
-    namespace: dict = {"__name__": "__docs__"}
-    for line, code, reason in blocks:
-        if reason is not None:
-            assert len(reason) > 10, f"{page.name}:{line}: say why the block does not run"
-            continue
-        exec(compile(code, f"{page.relative_to(ROOT)}:{line}", "exec"), namespace)  # noqa: S102
