@@ -235,6 +235,50 @@ from .zephycube import normalised_rose as normalised_rose
 from .zephycube import scalar_correction as scalar_correction
 from .zephycube import vector_correction as vector_correction
 
+__all__ = [
+    "io", "plots", "scenes", "direction_difference", "heading", "horizontal_speed", "seed_azimuth",
+    "wind_direction", "wrap180", "simulate_rotations", "stack_fields", "stack_mounts",
+    "unstack_field", "unstack_mounts", "ExactPoints", "GradedProbe", "beam_points",
+    "probe_for_field", "Calibration", "calibrate", "correction_factors", "DualDopplerDesign",
+    "Placement", "RegionBox", "RegionPolygon", "RegionRing", "VadDesign", "design_dual_doppler",
+    "design_placement", "design_vad", "dual_doppler_variance", "evaluate_placements",
+    "placement_objective", "placement_problem", "vad_variance", "DisturbedSector",
+    "disturbed_sectors", "excluded_width", "in_sectors", "merge_sectors", "AbstractField",
+    "FieldSequence", "GridField", "SnapshotField", "BLOCKING_FLAGS", "MIN_AVAILABILITY", "Flag",
+    "InverseFlag", "RecordFlag", "scan_bounds", "Simulation", "beam_gradient", "simulate",
+    "beam_directions", "body_to_cfd_rotation", "cfd_to_lidar_rotation", "cfd_to_north_rotation",
+    "lidar_to_cfd_rotation", "lidar_to_north_rotation", "rotate", "rotation_x", "rotation_y",
+    "rotation_z", "tilt_rotation", "Inversion", "JointInversion", "invert", "invert_joint",
+    "invert_joint_reconstructed", "invert_reconstructed", "AbstractMotion", "SampledMotion",
+    "SinusoidalMotion", "Mount", "AbstractProbe", "CWProbe", "PointProbe", "PulsedProbe",
+    "probe_for_spacing", "probe_transfer", "AbstractProgress", "CallbackProgress", "LineProgress",
+    "NoProgress", "ProgressCallback", "ProgressTask", "TextProgress", "TqdmProgress",
+    "progress_meter", "AbstractProfile", "Instrument", "PeriodicSpline", "PowerLawProfile",
+    "ProfileTable", "ResponseTable", "TableRuns", "UniformProfile", "CorrectionRose",
+    "correction_rose", "sector_rose", "Scan", "nacelle_2beam", "nacelle_4beam", "nacelle_shear",
+    "reconstruct", "six_beam", "windcube_v1", "windcube_v2", "zephir", "DUAL_ILL_CONDITIONED",
+    "CrossingGeometry", "DualDoppler", "ScanPattern", "ScanResult", "VadProfile",
+    "crossing_geometry", "dual_doppler", "gate_nodes", "gate_ranges", "instrument_probe", "ppi",
+    "rhi", "scan_points", "simulate_dual_doppler", "simulate_scan", "simulate_scan_series",
+    "spinner_rosette", "stare", "vad", "vad_fit", "Budget", "Sensitivity", "sensitivity",
+    "uncertainty", "Series", "SeriesStatistics", "simulate_series", "simulate_statistics",
+    "statistics", "LidarGeometry", "LidarVariance", "lidar_geometry", "lidar_response",
+    "lidar_variance", "lidar_variance_ratio", "reconstruction_coefficients", "ReynoldsStresses",
+    "reynolds_stresses", "stress_matrix", "Schedule", "schedule_for", "TurbulenceBox",
+    "box_variance", "box_wavenumbers", "fft_mann_box", "mann_box", "mann_eddy_lifetime",
+    "mann_spectrum_level", "mann_tensor", "synthesize_box", "run_demo", "FARM_SCANS", "FarmStudy",
+    "check_lidar_position", "farm_monitor_points", "farm_study", "write_farm_study",
+    "JointCorrected", "correct_records_joint", "MonitorPointField", "MonitorPoints",
+    "monitor_points", "simulate_from_monitor_points", "DEFAULT_MIN_AVAILABILITY",
+    "CorrectedRecords", "RecordSet", "check_instrument", "correct_records", "load_records",
+    "match_heights", "quality_summary", "reported_noise", "tilt_difference", "write_corrected_csv",
+    "write_corrected_netcdf", "explain_nans", "seed_result_files", "write_seed_results",
+    "build_table", "settings_mount", "settings_mounts", "simulate_settings", "REPORT_OUTPUTS",
+    "REPORT_SCANS", "SensitivityReport", "sensitivity_report", "write_sensitivity_report",
+    "write_series_report", "mean_wind_above", "series_field", "NormalisedRose", "ZephyCubeWind",
+    "beam_layout", "homogeneous_wind", "normalised_rose", "scalar_correction", "vector_correction",
+]
+
 try:
     __version__ = importlib.metadata.version("lidarjax")
 except importlib.metadata.PackageNotFoundError:  # running from a source tree

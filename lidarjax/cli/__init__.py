@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .. import __version__
 from . import calibrate as calibrate_cmd
 from . import correct, demo, design, farm, monitor_points, scan, series, simulate, table
 from . import sensitivity as sensitivity_cmd
@@ -31,6 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="lidarjax",
         description="Simulate wind lidars in CFD fields and correct their records.",
     )
+    parser.add_argument("--version", action="version", version=f"lidarjax {__version__}",
+                        help="print the version (lidarjax.__version__, the installed package's) and exit")
     parser.add_argument("--x64", action=argparse.BooleanOptionalAction, default=True,
                         help="compute in float64 (default) or float32 (--no-x64)")
     parser.add_argument("--no-cache", action="store_true",

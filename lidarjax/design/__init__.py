@@ -26,3 +26,10 @@ from .scanning import design_dual_doppler as design_dual_doppler
 from .scanning import design_vad as design_vad
 from .scanning import dual_doppler_variance as dual_doppler_variance
 from .scanning import vad_variance as vad_variance
+
+__all__ = [
+    "OBJECTIVES", "Placement", "RegionBox", "RegionPolygon", "design_placement",
+    "evaluate_placements", "placement_objective", "placement_problem", "DualDopplerDesign",
+    "RegionRing", "VadDesign", "design_dual_doppler", "design_vad", "dual_doppler_variance",
+    "vad_variance",
+]

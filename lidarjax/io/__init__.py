@@ -31,7 +31,7 @@ Optional extras: `pandas` (`Record.to_pandas`), `netcdf` (xarray; NetCDF read/wr
 without it.
 """
 
-from .._deprecated import deprecated_getattr
+from .._deprecated import deprecated_getattr as _deprecated_getattr
 from ._exact import CellPointField as CellPointField
 from ._exact import CellPointSnapshots as CellPointSnapshots
 from ._exact import CellPointTets as CellPointTets
@@ -109,4 +109,23 @@ from .windcube_scan import read_windcube_scan as read_windcube_scan
 from .zephir import ZephirRecord as ZephirRecord
 from .zephir import read_zephir_csv as read_zephir_csv
 
-__getattr__ = deprecated_getattr(__name__)
+__all__ = [
+    "CellPointField", "CellPointSnapshots", "CellPointTets", "cellpoint_field", "simulate_points",
+    "FieldArrays", "FieldLoadReport", "load_field", "read_field_arrays", "read_fluent_points",
+    "resample_to_grid", "save_field_netcdf", "save_field_npz", "HaloScan", "read_hpl", "FarmLayout",
+    "read_farm", "read_layout", "read_turbine_type", "MonitorPoints", "OpenFoamProbes",
+    "read_monitor_points_csv", "read_monitor_values_csv", "read_openfoam_probes",
+    "write_monitor_points_csv", "write_openfoam_probes", "write_zcfd_probes", "read_motion_csv",
+    "OpenFOAMField", "is_openfoam_case", "openfoam_times", "read_openfoam_field",
+    "read_openfoam_mesh", "resample_openfoam", "sample_openfoam", "RecordSet", "BEAM_AZIMUTHS",
+    "InstrumentReconstruction", "RtdBeams", "RtdRecord", "group_rtd", "instrument_reconstruction",
+    "read_rtd", "read_scan_netcdf", "write_scan_netcdf", "SEED_COLUMNS", "SEED_UNITS", "CsvTable",
+    "meteorological_from_seed", "read_seed_output", "read_table_csv", "seed_from_meteorological",
+    "seed_output_filename", "write_netcdf", "write_seed_output", "write_table_csv", "Settings",
+    "read_settings", "write_settings", "load_field_sequence", "STA_FIELDS", "StaRecord", "read_sta",
+    "write_series_sta", "write_sta", "load_table", "save_table", "TurbSimField", "read_hawc2_box",
+    "read_turbsim", "write_hawc2_box", "write_turbsim", "WindcubeScan", "read_windcube_scan",
+    "ZephirRecord", "read_zephir_csv",
+]
+
+__getattr__ = _deprecated_getattr(__name__)

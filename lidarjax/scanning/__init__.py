@@ -38,3 +38,11 @@ from .profiles import vad_fit as vad_fit
 from .simulate import ScanResult as ScanResult
 from .simulate import simulate_scan as simulate_scan
 from .simulate import simulate_scan_series as simulate_scan_series
+
+__all__ = [
+    "gate_nodes", "scan_points", "DUAL_ILL_CONDITIONED", "CrossingGeometry", "DualDoppler",
+    "crossing_geometry", "dual_doppler", "simulate_dual_doppler", "ScanPattern", "gate_ranges",
+    "ray_unit_vectors", "suggest_sub_rays", "INSTRUMENTS", "instrument_probe", "ppi", "rhi",
+    "rosette_angles", "spinner_rosette", "stare", "vad", "VadProfile", "vad_fit", "ScanResult",
+    "simulate_scan", "simulate_scan_series",
+]

@@ -12,7 +12,7 @@ Every scene is an `AbstractField` (CFD frame: ``+x`` east, ``+y`` north, ``+z`` 
 and m/s; directions meteorological), dynamic and differentiable in all its parameters.
 """
 
-from .._deprecated import deprecated_getattr
+from .._deprecated import deprecated_getattr as _deprecated_getattr
 from .analytic import Hemisphere as Hemisphere
 from .analytic import Hill as Hill
 from .analytic import Linear as Linear
@@ -31,4 +31,10 @@ from .farm import wind_farm as wind_farm
 from .turbulence import FrozenTurbulence as FrozenTurbulence
 from .turbulence import frozen_turbulence as frozen_turbulence
 
-__getattr__ = deprecated_getattr(__name__)
+__all__ = [
+    "Hemisphere", "Hill", "Linear", "PowerLaw", "Uniform", "hemisphere", "hill", "linear",
+    "power_law", "uniform", "FarmState", "WindFarm", "nacelle_mount", "overlap_area", "wind_farm",
+    "FrozenTurbulence", "frozen_turbulence",
+]
+
+__getattr__ = _deprecated_getattr(__name__)
