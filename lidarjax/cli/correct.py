@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -23,7 +22,14 @@ from ..workflows.records import (
     write_corrected_csv,
     write_corrected_netcdf,
 )
-from ._common import check_output_file, finite_float, positive_float
+from ._common import (
+    check_output_file,
+    finite_float,
+    input_file,
+    positive_float,
+    status_line,
+    warning_line,
+)
 
 
 def register(sub) -> None:
@@ -36,8 +42,8 @@ def register(sub) -> None:
                     "come back NaN with a reason in the flags column.",
         epilog="example: lidarjax correct --table site_table.npz --records "
                "wls7_2020_10_07.sta --out corrected.csv")
-    cor.add_argument("--table", required=True, help="response table from `lidarjax table`")
-    cor.add_argument("--records", required=True, help=".sta, .stdsta, .rtd or ZephIR .csv")
+    cor.add_argument("--table", required=True, type=input_file, help="response table from `lidarjax table`")
+    cor.add_argument("--records", required=True, type=input_file, help=".sta, .stdsta, .rtd or ZephIR .csv")
     cor.add_argument("--out", default=None, help="output CSV (default: <records>_corrected.csv); "
                      "an existing file is replaced atomically, an input never")
     cor.add_argument("--netcdf", default=None, help="CF NetCDF output (default: the CSV's name "
@@ -91,13 +97,9 @@ def write_profile_csv(path, time, joint, name, profile) -> None:
 
 def run(args) -> int:
     def say(text):
-        print(f"lidarjax correct: {text}", file=sys.stderr)
+        status_line("correct", text)
 
-    records = Path(args.records)
-    if not records.is_file():
-        raise FileNotFoundError(f"--records: record file not found: {records}")
-    if not Path(args.table).is_file():
-        raise FileNotFoundError(f"--table: table file not found: {args.table}")
+    records = Path(args.records)  # it and --table exist (checked when parsed)
     min_avail = DEFAULT_MIN_AVAILABILITY if args.min_availability is None else \
         args.min_availability
     if not 0.0 <= min_avail <= 100.0:
@@ -125,11 +127,11 @@ def run(args) -> int:
                          f"{'; '.join(mismatch)} (rebuild the table for this instrument, or "
                          "pass --allow-mismatch)")
     for w in rec.warnings:  # after the refusals: a refused file gets one line
-        say(f"warning: {w}")
+        warning_line("correct", w)
     for w in table_warnings(meta):
-        say(f"warning: {w}")
+        warning_line("correct", w)
     for m in mismatch:
-        say(f"warning: mismatch allowed: {m}")
+        warning_line("correct", f"mismatch allowed: {m}")
     tilt = tilt_difference(meta, rec)
     if tilt:
         say(tilt)

@@ -32,6 +32,7 @@ from ..mount import Mount
 from ..progress import LineProgress
 from ._common import (
     add_run_arguments,
+    add_settings_argument,
     check_output_folder,
     field_paths,
     finite_float,
@@ -102,8 +103,7 @@ def register(sub) -> None:
                "--region polygon:90,120,102,120,102,134,90,134 --height-above-surface 1 "
                "--objective worst --out design/",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    des.add_argument("settings", help="the seed's settings.dat (angles, heights, the lidar's "
-                                      "location as the initial guess)")
+    add_settings_argument(des, "angles, heights, the lidar's location as the initial guess")
     des.add_argument("--beta", type=finite_float, help="the run's platform rotation (default: "
                                                        "the settings file's beta)")
     add_run_arguments(des, default_scan="windcube_v1")

@@ -33,7 +33,11 @@ import numpy as np
 
 from ..io.layout import read_farm
 from ..workflows.farm_study import FARM_SCANS, check_lidar_position, farm_study, write_farm_study
-from ._common import finite_float, positive_float
+from ._common import (
+    finite_float,
+    input_file,
+    positive_float,
+)
 
 SCANS = FARM_SCANS
 
@@ -67,8 +71,9 @@ def register(sub) -> None:
                     "wake map, per-direction tables, yaw gradients and probe points.",
         epilog="example: lidarjax farm farm.txt --turbine nrel5mw.csv --lidar 252000 646300 0 "
                "--scan windcube_v2 --speed 10 --directions 0:360:2 --out farm_out")
-    p.add_argument("layouts", nargs="+", help="layout file(s): '<name> <easting> <northing>' lines")
-    p.add_argument("--turbine", action="append", required=True,
+    p.add_argument("layouts", nargs="+", type=input_file,
+                   help="layout file(s): '<name> <easting> <northing>' lines")
+    p.add_argument("--turbine", action="append", required=True, type=input_file,
                    help="turbine type CSV (# rotor_diameter, # hub_height, speed,ct columns); "
                         "once for all layouts or once per layout")
     where = p.add_mutually_exclusive_group(required=True)

@@ -35,10 +35,14 @@ from ..workflows.monitor_points import monitor_points, simulate_from_monitor_poi
 from ..workflows.seed_results import write_seed_results
 from ..workflows.seed_tables import settings_mount, settings_probes, table_region
 from ._common import (
+    add_beta_arguments,
     add_probe_arguments,
+    add_settings_argument,
     add_tilt_arguments,
+    field_input,
     field_paths,
     finite_float,
+    input_path,
     make_probe,
     make_scan,
     positive_float,
@@ -82,11 +86,9 @@ def register(sub) -> None:
                "settings.dat --all --scan windcube_v2 --probe pulsed --field 'runs/b{beta}' "
                "--sampled case/postProcessing/lidarProbes --out results/",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    pr.add_argument("settings", help="the seed's settings.dat")
-    which = pr.add_mutually_exclusive_group()
-    which.add_argument("--beta", type=finite_float, help="platform rotation (default: the settings "
-                                                 "file's beta)")
-    which.add_argument("--all", action="store_true", help="every beta row of the settings")
+    add_settings_argument(pr)
+    add_beta_arguments(pr, beta_help="platform rotation (default: the settings file's beta)",
+                       all_help="every beta row of the settings")
     pr.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v2")
     add_tilt_arguments(pr)
     pr.add_argument("--cone-angle", type=positive_float, default=None,
@@ -96,7 +98,7 @@ def register(sub) -> None:
                          "settings' j * height / nh)")
     add_probe_arguments(pr)
     nodes = pr.add_mutually_exclusive_group()
-    nodes.add_argument("--field", default=None, metavar="CFD",
+    nodes.add_argument("--field", default=None, metavar="CFD", type=field_input,
                        help="the CFD run(s) `lidarjax simulate --field` would read ('{beta}' "
                             "for several betas): the probe's nodes are chosen for its "
                             "resolution as simulate chooses them, so both routes sample the "
@@ -111,7 +113,7 @@ def register(sub) -> None:
                     help="function-object name and file stem (default lidarProbes)")
     pr.add_argument("--frequency", type=positive_int, default=100,
                     help="zCFD report frequency, solver cycles (default 100)")
-    pr.add_argument("--sampled", default=None,
+    pr.add_argument("--sampled", default=None, type=input_path,
                     help="read mode: OpenFOAM probes output (postProcessing/<name>, a time "
                          "folder or its U file) or a CSV with columns name,u,v,w")
     pr.add_argument("--time", type=finite_float, default=None,

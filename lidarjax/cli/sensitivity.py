@@ -18,6 +18,7 @@ from ..sensitivity import INPUTS, OUTPUTS
 from ..workflows.sensitivity_report import sensitivity_report, write_sensitivity_report
 from ._common import (
     add_run_arguments,
+    add_settings_argument,
     field_paths,
     make_probe,
     make_scan,
@@ -43,7 +44,7 @@ def register(sub) -> None:
                "--out budget/\n\ninputs: location (or x, y, z; m), beta, gamma, psi, epsilon, "
                "pitch, roll, cone_angle (deg), heights (m), speed (m/s of the free stream)",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    sen.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
+    add_settings_argument(sen, "all beta rows are used")
     add_run_arguments(sen, default_scan="windcube_v2")
     sen.add_argument("--std", action="append", default=[], metavar="NAME=VALUE",
                      help="standard uncertainty of an input, in its unit (repeatable): e.g. "

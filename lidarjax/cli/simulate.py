@@ -14,7 +14,6 @@ sub-rays and probe cover (`lidarjax.cli._scanning.scan_region`); per beta it wri
 from __future__ import annotations
 
 import argparse
-import sys
 
 from .._util import format_number
 from ..io import read_settings, write_scan_netcdf
@@ -24,14 +23,16 @@ from ..scanning import scan_points, simulate_scan
 from ..workflows.seed_results import explain_nans, seed_result_files, write_seed_results
 from ..workflows.seed_tables import settings_mount, simulate_settings, table_region
 from ._common import (
+    add_beta_arguments,
     add_run_arguments,
+    add_settings_argument,
     add_tilt_arguments,
     check_output_folder,
     field_paths,
-    finite_float,
     make_probe,
     make_scan,
     selected_betas,
+    warning_line,
 )
 from ._scanning import (
     add_scan_pattern_arguments,
@@ -67,11 +68,9 @@ def register(sub) -> None:
                "from above, an RHI on its vertical plane) instead of the seed files; --probe "
                "pulsed is then the instrument's pulse per gate (--instrument, --gate-length).",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    sim.add_argument("settings", help="the seed's settings.dat")
-    which = sim.add_mutually_exclusive_group()
-    which.add_argument("--beta", type=finite_float, help="platform rotation to run (default: the "
-                                                 "settings file's beta)")
-    which.add_argument("--all", action="store_true", help="run every beta row, one batch")
+    add_settings_argument(sim)
+    add_beta_arguments(sim, beta_help="platform rotation to run (default: the settings file's "
+                                      "beta)", all_help="run every beta row, one batch")
     add_run_arguments(sim, default_scan="windcube_v1", scan_type=scan_choice,
                       scan_help="a profiler (windcube_v1 default, windcube_v2, zephir), a "
                                 "scanning preset (ppi, rhi, stare, vad, rosette) or a Halo "
@@ -135,7 +134,7 @@ def run(args) -> int:
               "the same nodes, every beta's own)")
     why = explain_nans(sims, fields, settings, paths)
     if why:
-        print(f"lidarjax simulate: warning: {why}", file=sys.stderr)
+        warning_line("simulate", why)
     return 0
 
 
@@ -177,5 +176,5 @@ def run_scanning(args, settings, betas, paths) -> int:
         print(f"beta {b:g}: {describe(res, pattern.kind)}; wrote {', '.join(wrote)}")
         why = explain_scan_nans(res, field)
         if why:
-            print(f"lidarjax simulate: warning: beta {b:g}: {why}", file=sys.stderr)
+            warning_line("simulate", f"beta {b:g}: {why}")
     return 0

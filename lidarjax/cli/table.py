@@ -20,10 +20,12 @@ from ..workflows.records import check_instrument, load_records
 from ..workflows.seed_tables import build_table, table_region
 from ._common import (
     add_run_arguments,
+    add_settings_argument,
     add_tilt_arguments,
     check_output_file,
     field_paths,
     height_list,
+    input_file,
     make_probe,
     make_scan,
 )
@@ -40,14 +42,14 @@ def register(sub) -> None:
                     "source, which `correct` checks against each record file's header.",
         epilog="example: lidarjax table settings.dat --field 'runs/platform_{beta}.npz' "
                "--scan windcube_v2 --heights-from wls7_2020_10_07.sta --out site_table.npz")
-    tab.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
+    add_settings_argument(tab, "all beta rows are used")
     add_run_arguments(tab, default_scan="windcube_v2")
     add_tilt_arguments(tab)
     heights = tab.add_mutually_exclusive_group()
     heights.add_argument("--heights", type=height_list, default=None,
                          help="measurement heights in m above the lidar, e.g. 40,54,74 "
                               "(default: the settings file's)")
-    heights.add_argument("--heights-from", default=None, metavar="RECORDS",
+    heights.add_argument("--heights-from", default=None, metavar="RECORDS", type=input_file,
                          help="take the heights from a record file (.sta, .rtd or ZephIR .csv)")
     tab.add_argument("--tilt-from-records", action="store_true",
                      help="with --heights-from: take --pitch and --roll from the record "
@@ -141,9 +143,7 @@ def _tilt_from(args, rec) -> None:
 
 
 def _record_heights(path):
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"--heights-from: record file not found: {p}")
+    p = Path(path)  # an existing file (checked when parsed)
     rec = load_records(p)
     if rec.heights.size == 0:
         raise ValueError(f"--heights-from {p}: the file lists no heights")
