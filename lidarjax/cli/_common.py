@@ -37,6 +37,7 @@ from .. import scan as scans
 from .._util import format_number, nan_mean
 from ..io.openfoam import is_openfoam_case
 from ..probe import CWProbe, PulsedProbe
+from ..workflows.records import DEFAULT_MIN_AVAILABILITY
 
 SCAN_CHOICES = ("windcube_v1", "windcube_v2", "zephir")
 
@@ -146,12 +147,17 @@ def setup_compilation_cache(args) -> Path | None:
 # numbers
 
 
+def _parsed(text: str, convert, expected: str):
+    """``convert(text)``, or `argparse.ArgumentTypeError` saying what was `expected`."""
+    try:
+        return convert(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+
+
 def finite_float(text: str) -> float:
     """argparse type: a finite float."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    value = _parsed(text, float, "a number")
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
     return value
@@ -167,12 +173,17 @@ def positive_float(text: str) -> float:
 
 def positive_int(text: str) -> int:
     """argparse type: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    value = _parsed(text, int, "a positive integer")
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def percentage(text: str) -> float:
+    """argparse type: a percentage in [0, 100]."""
+    value = finite_float(text)
+    if not 0.0 <= value <= 100.0:
+        raise argparse.ArgumentTypeError(f"expected a percentage in [0, 100], got {text!r}")
     return value
 
 
@@ -336,6 +347,21 @@ def check_output_folder(path, *, files=(), inputs=(), option: str = "--out") -> 
             raise ValueError(f"{option}: {check} is a folder, expected an output file name "
                              "there; move it away")
     return out
+
+
+def add_record_arguments(parser, *, records: dict, table: str = "", used: str = "not "
+                         "used") -> None:
+    """The inputs of `correct` and `calibrate`: ``--table`` (a table from `lidarjax table`;
+    `table`: more about it), ``--records`` (`records`: the keywords of its argument, e.g. its
+    help) and ``--min-availability`` (`used`: what happens to records below it)."""
+    parser.add_argument("--table", required=True, type=input_file,
+                        help="response table from `lidarjax table`" + (f" ({table})" if table
+                                                                         else ""))
+    parser.add_argument("--records", required=True, type=input_file, **records)
+    parser.add_argument("--min-availability", type=percentage,
+                        default=DEFAULT_MIN_AVAILABILITY,
+                        help=f"records below this data availability (percent) are {used} "
+                             f"(default {DEFAULT_MIN_AVAILABILITY:g})")
 
 
 def add_settings_argument(parser, detail: str = "") -> None:

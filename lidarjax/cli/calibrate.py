@@ -17,13 +17,13 @@ from ..io import load_table, read_settings
 from ..io.fields import check_field_file, load_field
 from ..response import ProfileTable
 from ..workflows.records import (
-    DEFAULT_MIN_AVAILABILITY,
     load_records,
     match_heights,
     subset_table,
 )
 from ..workflows.seed_tables import SEED_U_REF, table_runs
 from ._common import (
+    add_record_arguments,
     check_output_file,
     finite_float,
     input_file,
@@ -54,10 +54,8 @@ def register(sub) -> None:
                     "tilt in the record header where it has one.",
         epilog="example: lidarjax calibrate --table site_table.npz --records wls.rtd "
                "--reference mast.csv --out calibration.json")
-    cal.add_argument("--table", required=True, type=input_file, help="response table from `lidarjax table` "
-                     "(built with the nominal installation)")
-    cal.add_argument("--records", required=True, nargs="+", type=input_file,
-                     help="raw LOS record files (.rtd); several files are pooled")
+    add_record_arguments(cal, table="built with the nominal installation", records={
+        "nargs": "+", "help": "raw LOS record files (.rtd); several files are pooled"})
     cal.add_argument("--reference", default=None, type=input_file,
                      help="CSV of the reference free stream, columns time,height_m,speed_m_s,"
                           "direction_deg (time as in the records, end of interval, UTC)")
@@ -74,8 +72,6 @@ def register(sub) -> None:
     cal.add_argument("--parameter", type=finite_float, default=None,
                      help="for a table over a profile parameter: the value to calibrate at "
                           "(default the middle of its range)")
-    cal.add_argument("--min-availability", type=finite_float, default=None,
-                     help="records below this availability (percent) are not used (default 80)")
     cal.add_argument("--exact", action="store_true",
                      help="iterate on the exact geometry: read the table's CFD runs again "
                           "(the settings and field files its metadata names, cropped to where "
@@ -171,8 +167,7 @@ def _read_records(args, files, table):
     """The raw LOS of every record file at the heights it shares with `table`: ``(los (r, h,
     b), times (r,), (table index, record index) of the heights, header tilt {name: deg})``;
     every file must be a ``.rtd`` with the same heights."""
-    min_avail = DEFAULT_MIN_AVAILABILITY if args.min_availability is None else \
-        args.min_availability
+    min_avail = args.min_availability
     los, times, heights, header = [], [], None, {}
     for f in files:
         rec = load_records(f, period=args.period, min_availability=min_avail)

@@ -12,7 +12,6 @@ from ..io import load_table
 from ..response import ProfileTable
 from ..workflows.joint_records import correct_records_joint
 from ..workflows.records import (
-    DEFAULT_MIN_AVAILABILITY,
     check_instrument,
     correct_records,
     load_records,
@@ -23,9 +22,9 @@ from ..workflows.records import (
     write_corrected_netcdf,
 )
 from ._common import (
+    add_record_arguments,
     check_output_file,
     finite_float,
-    input_file,
     positive_float,
     status_line,
     warning_line,
@@ -42,8 +41,8 @@ def register(sub) -> None:
                     "come back NaN with a reason in the flags column.",
         epilog="example: lidarjax correct --table site_table.npz --records "
                "wls7_2020_10_07.sta --out corrected.csv")
-    cor.add_argument("--table", required=True, type=input_file, help="response table from `lidarjax table`")
-    cor.add_argument("--records", required=True, type=input_file, help=".sta, .stdsta, .rtd or ZephIR .csv")
+    add_record_arguments(cor, records={"help": ".sta, .stdsta, .rtd or ZephIR .csv"},
+                         used="flagged and not used")
     cor.add_argument("--out", default=None, help="output CSV (default: <records>_corrected.csv); "
                      "an existing file is replaced atomically, an input never")
     cor.add_argument("--netcdf", default=None, help="CF NetCDF output (default: the CSV's name "
@@ -59,9 +58,6 @@ def register(sub) -> None:
     cor.add_argument("--cnr-threshold", type=finite_float, default=None,
                      help="CNR threshold in dB for .rtd samples (default: the file header's "
                           "CNRThreshold)")
-    cor.add_argument("--min-availability", type=finite_float, default=None,
-                     help="records below this data availability (percent) are flagged and not "
-                          "used (default 80)")
     cor.add_argument("--allow-mismatch", action="store_true",
                      help="correct although the record header disagrees with the table (scan, "
                           "cone angle, direction offset); the mismatch is printed")
@@ -100,10 +96,7 @@ def run(args) -> int:
         status_line("correct", text)
 
     records = Path(args.records)  # it and --table exist (checked when parsed)
-    min_avail = DEFAULT_MIN_AVAILABILITY if args.min_availability is None else \
-        args.min_availability
-    if not 0.0 <= min_avail <= 100.0:
-        raise ValueError(f"--min-availability must be a percentage in [0, 100], got {min_avail}")
+    min_avail = args.min_availability  # a percentage (checked when parsed)
     inputs = [("--table", args.table), ("--records", records)]
     out = Path(args.out) if args.out else records.with_name(records.stem + "_corrected.csv")
     check_output_file(out, inputs=inputs)
