@@ -53,6 +53,18 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+def add_command(sub, name: str, run, help: str, description: str, *, epilog: str | None = None,
+                raw: bool = False, aliases=()) -> argparse.ArgumentParser:
+    """One command's sub-parser: `name` (and `aliases`) with its one-line `help`, its
+    `description` and `epilog` (`raw`: printed as written, line breaks kept), running
+    ``run(args)``. Returns the parser, for the command's arguments."""
+    kw = {"formatter_class": argparse.RawDescriptionHelpFormatter} if raw else {}
+    parser = sub.add_parser(name, help=help, description=description, epilog=epilog,
+                            aliases=list(aliases), **kw)
+    parser.set_defaults(func=run)
+    return parser
+
+
 class Terminated(BaseException):  # noqa: N818 - named like KeyboardInterrupt
     """Raised in the main thread when the process receives SIGTERM."""
 

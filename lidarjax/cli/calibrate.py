@@ -23,6 +23,7 @@ from ..workflows.records import (
 )
 from ..workflows.seed_tables import SEED_U_REF, table_runs
 from ._common import (
+    add_command,
     add_record_arguments,
     check_output_file,
     finite_float,
@@ -43,17 +44,18 @@ def _wrt(text: str) -> tuple[str, ...]:
 
 
 def register(sub) -> None:
-    cal = sub.add_parser(
-        "calibrate", help="estimate the installation's north offset and tilt from LOS records",
-        description="Fit constant offsets of the installation (epsilon: north offset, pitch, "
-                    "roll; degrees) to many raw LOS records (.rtd) through the table's forward "
-                    "model, with standard errors and correlations. Without --reference only "
-                    "pitch and roll are identifiable (from the vertical beam and how the "
-                    "apparent vertical wind follows the direction); epsilon needs a reference "
-                    "free stream (mast, other lidar, model). The estimate is compared with the "
-                    "tilt in the record header where it has one.",
+    cal = add_command(
+        sub, "calibrate", run,
+        "estimate the installation's north offset and tilt from LOS records",
+        "Fit constant offsets of the installation (epsilon: north offset, pitch, "
+        "roll; degrees) to many raw LOS records (.rtd) through the table's forward "
+        "model, with standard errors and correlations. Without --reference only "
+        "pitch and roll are identifiable (from the vertical beam and how the "
+        "apparent vertical wind follows the direction); epsilon needs a reference "
+        "free stream (mast, other lidar, model). The estimate is compared with the "
+        "tilt in the record header where it has one.",
         epilog="example: lidarjax calibrate --table site_table.npz --records wls.rtd "
-               "--reference mast.csv --out calibration.json")
+        "--reference mast.csv --out calibration.json")
     add_record_arguments(cal, table="built with the nominal installation", records={
         "nargs": "+", "help": "raw LOS record files (.rtd); several files are pooled"})
     cal.add_argument("--reference", default=None, type=input_file,
@@ -80,7 +82,6 @@ def register(sub) -> None:
                           "fit what is left (lidarjax.calibrate(runs=...)); meshes are sampled "
                           "on their resampling grid, the table too")
     cal.add_argument("--out", default=None, help="write the result as JSON")
-    cal.set_defaults(func=run)
 
 
 def _reference(path: Path, times: np.ndarray, heights: np.ndarray):

@@ -22,6 +22,7 @@ from ..workflows.records import (
     write_corrected_netcdf,
 )
 from ._common import (
+    add_command,
     add_record_arguments,
     check_output_file,
     finite_float,
@@ -32,15 +33,16 @@ from ._common import (
 
 
 def register(sub) -> None:
-    cor = sub.add_parser(
-        "correct", help="invert lidar records for the free-stream wind with a response table",
-        description="Read Windcube .sta/.rtd or ZephIR .csv records, check the instrument "
-                    "against the table, invert every record and height the table has, and "
-                    "write corrected speed, direction, uncertainty and flags as CSV and CF "
-                    "NetCDF, written atomically. Bad records "
-                    "come back NaN with a reason in the flags column.",
+    cor = add_command(
+        sub, "correct", run,
+        "invert lidar records for the free-stream wind with a response table",
+        "Read Windcube .sta/.rtd or ZephIR .csv records, check the instrument "
+        "against the table, invert every record and height the table has, and "
+        "write corrected speed, direction, uncertainty and flags as CSV and CF "
+        "NetCDF, written atomically. Bad records "
+        "come back NaN with a reason in the flags column.",
         epilog="example: lidarjax correct --table site_table.npz --records "
-               "wls7_2020_10_07.sta --out corrected.csv")
+        "wls7_2020_10_07.sta --out corrected.csv")
     add_record_arguments(cor, records={"help": ".sta, .stdsta, .rtd or ZephIR .csv"},
                          used="flagged and not used")
     cor.add_argument("--out", default=None, help="output CSV (default: <records>_corrected.csv); "
@@ -69,7 +71,6 @@ def register(sub) -> None:
                           "the CSV as <out>_profile.csv. A table without a profile axis is "
                           "corrected per height (said in one line)")
     cor.add_argument("--quiet", action="store_true", help="no progress lines")
-    cor.set_defaults(func=run)
 
 
 def write_profile_csv(path, time, joint, name, profile) -> None:

@@ -36,6 +36,7 @@ from ..workflows.seed_results import write_seed_results
 from ..workflows.seed_tables import settings_mount, settings_probes, table_region
 from ._common import (
     add_beta_arguments,
+    add_command,
     add_probe_arguments,
     add_settings_argument,
     add_tilt_arguments,
@@ -65,27 +66,28 @@ def _heights(text: str) -> list[float]:
 
 
 def register(sub) -> None:
-    pr = sub.add_parser(
-        "monitor-points", aliases=["probes"],
-        help="write the lidar's sample points as CFD monitor points (OpenFOAM probes, zCFD, "
-             "CSV), "
-                       "or simulate from the CFD code's samples (--sampled)",
-        description="Write the beam focus points (or probe-volume quadrature nodes) and the "
-                    "point-reference column of every selected mount of a seed settings.dat as "
-                    "an OpenFOAM probes function object (<out>/<name>), a zCFD probe file "
-                    "(<out>/<name>_zcfd.py, turb_probe layout) and CSV (<out>/<name>.csv). "
-                    "Each probe is named <mount>_h<height>_beam<b>_q<node>. With --field CFD "
-                    "the nodes are those 'lidarjax simulate --field CFD' samples, every beta "
-                    "its own (one points list: each mount's points in turn). With --sampled, "
-                    "read the values the CFD code sampled there instead (checked rotation "
-                    "by rotation against the points these options give) and write the seed "
-                    "output files, as 'lidarjax simulate' does.",
+    pr = add_command(
+        sub, "monitor-points", run,
+        "write the lidar's sample points as CFD monitor points (OpenFOAM probes, zCFD, "
+        "CSV), "
+        "or simulate from the CFD code's samples (--sampled)",
+        "Write the beam focus points (or probe-volume quadrature nodes) and the "
+        "point-reference column of every selected mount of a seed settings.dat as "
+        "an OpenFOAM probes function object (<out>/<name>), a zCFD probe file "
+        "(<out>/<name>_zcfd.py, turb_probe layout) and CSV (<out>/<name>.csv). "
+        "Each probe is named <mount>_h<height>_beam<b>_q<node>. With --field CFD "
+        "the nodes are those 'lidarjax simulate --field CFD' samples, every beta "
+        "its own (one points list: each mount's points in turn). With --sampled, "
+        "read the values the CFD code sampled there instead (checked rotation "
+        "by rotation against the points these options give) and write the seed "
+        "output files, as 'lidarjax simulate' does.",
         epilog="example: lidarjax monitor-points settings.dat --all --scan windcube_v2 --probe pulsed "
-               "--field 'runs/b{beta}' --out probes/ ; cp probes/lidarProbes case/system/ ; "
-               "(cd case && postProcess -func lidarProbes -latestTime) ; lidarjax monitor-points "
-               "settings.dat --all --scan windcube_v2 --probe pulsed --field 'runs/b{beta}' "
-               "--sampled case/postProcessing/lidarProbes --out results/",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+        "--field 'runs/b{beta}' --out probes/ ; cp probes/lidarProbes case/system/ ; "
+        "(cd case && postProcess -func lidarProbes -latestTime) ; lidarjax monitor-points "
+        "settings.dat --all --scan windcube_v2 --probe pulsed --field 'runs/b{beta}' "
+        "--sampled case/postProcessing/lidarProbes --out results/",
+        aliases=["probes"],
+        raw=True)
     add_settings_argument(pr)
     add_beta_arguments(pr, beta_help="platform rotation (default: the settings file's beta)",
                        all_help="every beta row of the settings")
@@ -121,7 +123,6 @@ def register(sub) -> None:
     pr.add_argument("--u-ref", type=vector, default=(-15.0, 0.0, 0.0),
                     help="read mode: free stream u,v,w in the CFD frame, m/s (default -15,0,0)")
     pr.add_argument("--out", required=True, help="output folder")
-    pr.set_defaults(func=run)
 
 
 def _configuration(args):

@@ -44,6 +44,7 @@ from ..timing import schedule_for
 from ..workflows.series_report import write_series_csv, write_series_report
 from ..workflows.series_run import mean_wind_above, series_field
 from ._common import (
+    add_command,
     add_probe_arguments,
     add_settings_argument,
     check_output_folder,
@@ -90,33 +91,34 @@ def _mean_flow(text: str) -> str:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "series", help="simulated 10-minute statistics (.sta) in frozen turbulence over a mean flow",
-        description="Simulate every line of sight at the time it is taken through a turbulence "
-                    "box advected over a mean flow (Taylor), build the instrument's "
-                    "reconstructions and reduce them to 10-minute statistics: a simulated .sta "
-                    "(speed, dispersion, min, max, direction, Z-wind, availability), a CSV with "
-                    "lidar, cup and sonic statistics, and a figure of lidar TI against point TI "
-                    "per height. The lidar location and heights come from the seed settings.dat.",
+    p = add_command(
+        sub, "series", run,
+        "simulated 10-minute statistics (.sta) in frozen turbulence over a mean flow",
+        "Simulate every line of sight at the time it is taken through a turbulence "
+        "box advected over a mean flow (Taylor), build the instrument's "
+        "reconstructions and reduce them to 10-minute statistics: a simulated .sta "
+        "(speed, dispersion, min, max, direction, Z-wind, availability), a CSV with "
+        "lidar, cup and sonic statistics, and a figure of lidar TI against point TI "
+        "per height. The lidar location and heights come from the seed settings.dat.",
         epilog="examples:\n"
-               "  lidarjax series settings.dat --field uniform --speed 10 --direction 270 "
-               "--generate-box 512,32,32 --out series/\n"
-               "  lidarjax series settings.dat --field run.npz --box turb.bts --scan zephir "
-               "--hours 6 --out series/\n"
-               "  lidarjax series settings.dat --field run.npz --box u.bin,v.bin,w.bin "
-               "--box-shape 8192,32,32 --box-spacing 2,4,4 --out series/\n"
-               "  lidarjax series settings.dat --field uniform --speed 8 --direction 270 "
-               "--generate-box 512,32,32 --scan vad --elevation 60 --gates 40 --scans 20 "
-               "--out vad/\n\n"
-               "A scanning --scan (a preset or a .hpl / .nc scan file) is flown through the "
-               "same field in time instead: --scans N repetitions (default: as many as cover "
-               "--hours). It writes series_scan.nc (CF NetCDF, time x beam x range: LOS, ray "
-               "times, azimuth, elevation, flags), series_scan.png (the last scan on its cone or "
-               "plane; not with --no-plots) and, for a PPI or VAD of 3 rays or more, "
-               "series_vad.csv (each scan's VAD wind profile per gate). The 10-minute .sta "
-               "statistics are the profilers' and "
-               "are not written for a scanning scan.",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+        "  lidarjax series settings.dat --field uniform --speed 10 --direction 270 "
+        "--generate-box 512,32,32 --out series/\n"
+        "  lidarjax series settings.dat --field run.npz --box turb.bts --scan zephir "
+        "--hours 6 --out series/\n"
+        "  lidarjax series settings.dat --field run.npz --box u.bin,v.bin,w.bin "
+        "--box-shape 8192,32,32 --box-spacing 2,4,4 --out series/\n"
+        "  lidarjax series settings.dat --field uniform --speed 8 --direction 270 "
+        "--generate-box 512,32,32 --scan vad --elevation 60 --gates 40 --scans 20 "
+        "--out vad/\n\n"
+        "A scanning --scan (a preset or a .hpl / .nc scan file) is flown through the "
+        "same field in time instead: --scans N repetitions (default: as many as cover "
+        "--hours). It writes series_scan.nc (CF NetCDF, time x beam x range: LOS, ray "
+        "times, azimuth, elevation, flags), series_scan.png (the last scan on its cone or "
+        "plane; not with --no-plots) and, for a PPI or VAD of 3 rays or more, "
+        "series_vad.csv (each scan's VAD wind profile per gate). The 10-minute .sta "
+        "statistics are the profilers' and "
+        "are not written for a scanning scan.",
+        raw=True)
     add_settings_argument(p, "location, angles, heights")
     p.add_argument("--beta", type=finite_float, default=None,
                    help="platform rotation row to use (default: the file's beta)")
@@ -124,7 +126,6 @@ def register(sub) -> None:
     _box_arguments(p)
     _instrument_arguments(p)
     _output_arguments(p)
-    p.set_defaults(func=run)
 
 
 def _flow_arguments(p) -> None:

@@ -19,6 +19,7 @@ from ..response import PowerLawProfile, UniformProfile
 from ..workflows.records import check_instrument, load_records
 from ..workflows.seed_tables import build_table, table_region
 from ._common import (
+    add_command,
     add_run_arguments,
     add_settings_argument,
     add_tilt_arguments,
@@ -33,15 +34,16 @@ from ._dask import add_dask_arguments, dask_client, region_loader
 
 
 def register(sub) -> None:
-    tab = sub.add_parser(
-        "table", help="build a response table (for `correct`) from CFD runs over directions",
-        description="Simulate the lidar of a seed settings.dat in every CFD run (one per "
-                    "platform rotation beta, i.e. per inflow direction) and save the LOS "
-                    "per unit free-stream speed as a response table (.npz). The table records "
-                    "the instrument (scan, cone angle, beams), probe, mount, heights and CFD "
-                    "source, which `correct` checks against each record file's header.",
+    tab = add_command(
+        sub, "table", run,
+        "build a response table (for `correct`) from CFD runs over directions",
+        "Simulate the lidar of a seed settings.dat in every CFD run (one per "
+        "platform rotation beta, i.e. per inflow direction) and save the LOS "
+        "per unit free-stream speed as a response table (.npz). The table records "
+        "the instrument (scan, cone angle, beams), probe, mount, heights and CFD "
+        "source, which `correct` checks against each record file's header.",
         epilog="example: lidarjax table settings.dat --field 'runs/platform_{beta}.npz' "
-               "--scan windcube_v2 --heights-from wls7_2020_10_07.sta --out site_table.npz")
+        "--scan windcube_v2 --heights-from wls7_2020_10_07.sta --out site_table.npz")
     add_settings_argument(tab, "all beta rows are used")
     add_run_arguments(tab, default_scan="windcube_v2")
     add_tilt_arguments(tab)
@@ -70,7 +72,6 @@ def register(sub) -> None:
     tab.add_argument("--out", required=True, help="table file to write (.npz); an existing "
                      "file is replaced atomically, an input never")
     add_dask_arguments(tab)
-    tab.set_defaults(func=run)
 
 
 def parameter_values(text: str) -> tuple[str, list[float]]:
