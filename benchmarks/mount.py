@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import subprocess
 import sys
 import time
@@ -91,11 +92,14 @@ def main() -> None:
                  "ratio_current_over_baseline": m["current"] / m[BASELINE_COMMIT]}
         results["cases"][label] = entry
         print(label, json.dumps(entry))
+    results["load_average"] = list(os.getloadavg())  # other work sharing the CPUs
     out = Path(__file__).parent / "results"
     out.mkdir(exist_ok=True)
     (out / "mount.json").write_text(json.dumps(results, indent=2) + "\n")
     rows = [f"`Mount(locations, beta=betas, psi=180.0)`, {N:,} mounts, median of "
-            f"{args.repeats} (ms); {machine_line(results['machine'])}", "",
+            f"{args.repeats} (ms); {machine_line(results['machine'])}; load average "
+            f"{results['load_average'][0]:.1f} (figures of a few ms are at the noise level of "
+            "a loaded machine)", "",
             f"| input | current | {BASELINE_COMMIT} (baseline) | {REGRESSED_COMMIT} (before the "
             "fix) | current / baseline |", "|---|---:|---:|---:|---:|"]
     for label, e in results["cases"].items():
