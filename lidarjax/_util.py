@@ -163,6 +163,28 @@ def summarise_lines(lines: Sequence[int], limit: int = 8) -> str:
     return shown if len(lines) <= limit else f"{shown}, ... ({len(lines)} lines)"
 
 
+def nan_mean(values, axis=None):
+    """``numpy.nanmean`` without its ``RuntimeWarning: Mean of empty slice``: the mean of the
+    entries that are not NaN (along `axis`), NaN where there are none (an empty or all-NaN
+    slice). For printed summaries, which then say why a value is NaN."""
+    a = np.asarray(values, np.float64)
+    given = ~np.isnan(a)
+    n = np.count_nonzero(given, axis=axis)
+    total = np.sum(np.where(given, a, 0.0), axis=axis)
+    return np.where(n > 0, total / np.maximum(n, 1), np.nan)
+
+
+def nan_max(values, axis=None):
+    """``numpy.nanmax`` without its ``RuntimeWarning: All-NaN slice``: NaN where a slice is
+    empty or all NaN."""
+    a = np.asarray(values, np.float64)
+    given = ~np.isnan(a)
+    if a.size == 0:
+        return np.max(a, axis=axis, initial=np.nan) if axis is not None else np.nan
+    peak = np.max(np.where(given, a, -np.inf), axis=axis)
+    return np.where(np.any(given, axis=axis), peak, np.nan)
+
+
 
 
 class ArrayMemo:

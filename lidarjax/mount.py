@@ -164,12 +164,18 @@ class Mount(eqx.Module):
 
 
 def _as_traced_array(value):
-    """A number, tuple, list or array holding a tracer (under `jax.grad`, `jax.jit` or
-    `jax.vmap`) as one JAX array, so that shapes and dtypes can be read without converting
-    the tracer to numpy; concrete values and JAX arrays are returned unchanged."""
-    if isinstance(value, jax.Array) or is_concrete(value):
+    """A number, array or nested tuple/list as one array, its numbers read once: a sequence
+    holding a tracer (under `jax.grad`, `jax.jit` or `jax.vmap`) as one JAX array, so that
+    shapes and dtypes can be read without converting the tracer to numpy; a sequence of host
+    numbers as one float64 numpy array (the default float, as a Python number gets), so that
+    the checks after it read one array, not every number again; numbers and arrays are
+    returned unchanged."""
+    if not isinstance(value, list | tuple):
         return value
-    return jnp.asarray(value)
+    try:  # one pass of numpy's converter; it refuses a tracer
+        return np.asarray(value, dtype=np.float64)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return jnp.asarray(value)
 
 
 def _leaf(value, n):

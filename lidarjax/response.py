@@ -227,8 +227,10 @@ def tabulated_start(w, los, values, spec: str, lead: int):
     entry's flat index and ``u_k`` ``(*lead axes)``."""
     a = jnp.einsum(spec, w * los, values, precision=jax.lax.Precision.HIGHEST)
     c = jnp.einsum(spec, w, values * values, precision=jax.lax.Precision.HIGHEST)
-    a = a.reshape(a.shape[:lead] + (-1,))
-    c = c.reshape(c.shape[:lead] + (-1,))
+    # the entries' count spelled out, not -1: an empty batch (no problems) stays reshapeable
+    entries = math.prod(a.shape[lead:])
+    a = a.reshape(a.shape[:lead] + (entries,))
+    c = c.reshape(c.shape[:lead] + (entries,))
     uk = jnp.where((a > 0) & (c > 0), a / jnp.where(c > 0, c, 1.0), 0.0)
     k = jnp.argmax(a * uk, axis=-1)
     return k, jnp.take_along_axis(uk, k[..., None], axis=-1)[..., 0]

@@ -2,7 +2,9 @@
 argparse sub-parser) and `run(args)` (returns the exit code).
 
 Every command validates its inputs before computing and turns user errors into one line on
-stderr and exit code 2 (`ValueError`, `FileNotFoundError`); Ctrl-C gives one line and 130.
+stderr and exit code 2 (`ValueError`, `FileNotFoundError`; a missing input file or folder is
+named when the arguments are parsed); Ctrl-C gives one line and 130. Warnings are one line
+each, ``lidarjax COMMAND: warning: ...`` (`one_line_warnings`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from ._common import (
     Terminated,
     enable_x64,
     install_signal_handlers,
+    one_line_warnings,
     setup_compilation_cache,
 )
 
@@ -55,7 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     setup_compilation_cache(args)
     restore = install_signal_handlers()
     try:
-        return args.func(args)
+        with one_line_warnings(args.command):
+            return args.func(args)
     except (ValueError, FileNotFoundError) as err:
         print(f"lidarjax {args.command}: error: {err}", file=sys.stderr)
         return 2

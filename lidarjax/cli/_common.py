@@ -19,20 +19,25 @@ Besides the shared arguments this module holds the command line's file disciplin
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import signal
 import string
+import sys
 import tempfile
 import threading
+import warnings
 from pathlib import Path
 
 import jax
+import numpy as np
 
 from .. import scan as scans
-from .._util import format_number
+from .._util import format_number, nan_mean
 from ..io.openfoam import is_openfoam_case
 from ..probe import CWProbe, PulsedProbe
+from ..workflows.records import DEFAULT_MIN_AVAILABILITY
 
 SCAN_CHOICES = ("windcube_v1", "windcube_v2", "zephir")
 
@@ -46,6 +51,18 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def add_command(sub, name: str, run, help: str, description: str, *, epilog: str | None = None,
+                raw: bool = False, aliases=()) -> argparse.ArgumentParser:
+    """One command's sub-parser: `name` (and `aliases`) with its one-line `help`, its
+    `description` and `epilog` (`raw`: printed as written, line breaks kept), running
+    ``run(args)``. Returns the parser, for the command's arguments."""
+    kw = {"formatter_class": argparse.RawDescriptionHelpFormatter} if raw else {}
+    parser = sub.add_parser(name, help=help, description=description, epilog=epilog,
+                            aliases=list(aliases), **kw)
+    parser.set_defaults(func=run)
+    return parser
 
 
 class Terminated(BaseException):  # noqa: N818 - named like KeyboardInterrupt
@@ -65,6 +82,48 @@ def install_signal_handlers():
 
     previous = signal.signal(signal.SIGTERM, _terminate)
     return lambda: signal.signal(signal.SIGTERM, previous)
+
+
+def status_line(command: str, text) -> None:
+    """Print `text` on stderr as one line of the command: ``lidarjax COMMAND: ...``."""
+    print(f"lidarjax {command}: {text}", file=sys.stderr)
+
+
+def warning_line(command: str, text) -> None:
+    """Print `text` as the command's one-line warning on stderr: ``lidarjax COMMAND: warning:
+    ...`` (line breaks and runs of spaces in `text` become single spaces)."""
+    status_line(command, f"warning: {' '.join(str(text).split())}")
+
+
+@contextlib.contextmanager
+def one_line_warnings(command: str):
+    """While the command runs, every Python warning that is shown (the filters decide which,
+    as always) is printed by `warning_line`: one line, without the source file, line number
+    and source line Python adds. Restored on the way out: the library's warnings stay proper
+    `UserWarning` instances for other callers."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        warning_line(command, message)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
+
+
+def print_height_means(heights, columns: dict, *, what: str = "record") -> None:
+    """A table of per-height means over records: `columns` maps a header to ``(values (r, h),
+    width, decimals)``. A mean with no value behind it (no records, or all NaN at that
+    height) prints ``nan``, and one line after the table says why, never numpy's warning."""
+    print(f"{'height':>7s} " + " ".join(f"{name:>{w}s}" for name, (_, w, _) in columns.items()))
+    means = {name: nan_mean(np.asarray(v, np.float64).reshape(-1, len(heights)), axis=0)
+             for name, (v, _, _) in columns.items()}
+    for k, h in enumerate(heights):
+        print(f"{h:7.1f} " + " ".join(f"{means[name][k]:{w}.{d}f}"
+                                      for name, (_, w, d) in columns.items()))
+    empty = [name for name, m in means.items() if np.isnan(m).any()]
+    if empty:
+        print(f"nan: no finite {what} behind the mean ({', '.join(empty)}; no {what}s, or every "
+              f"one NaN at that height: see its flags)")
 
 
 def cache_folder() -> Path:
@@ -100,12 +159,17 @@ def setup_compilation_cache(args) -> Path | None:
 # numbers
 
 
+def _parsed(text: str, convert, expected: str):
+    """``convert(text)``, or `argparse.ArgumentTypeError` saying what was `expected`."""
+    try:
+        return convert(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+
+
 def finite_float(text: str) -> float:
     """argparse type: a finite float."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    value = _parsed(text, float, "a number")
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
     return value
@@ -121,12 +185,17 @@ def positive_float(text: str) -> float:
 
 def positive_int(text: str) -> int:
     """argparse type: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    value = _parsed(text, int, "a positive integer")
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def percentage(text: str) -> float:
+    """argparse type: a percentage in [0, 100]."""
+    value = finite_float(text)
+    if not 0.0 <= value <= 100.0:
+        raise argparse.ArgumentTypeError(f"expected a percentage in [0, 100], got {text!r}")
     return value
 
 
@@ -153,6 +222,62 @@ def height_list(text: str) -> tuple[float, ...]:
     if any(b <= a for a, b in zip(values, values[1:], strict=False)):
         raise argparse.ArgumentTypeError(f"heights must be strictly increasing, got {text!r}")
     return values
+
+
+# ------------------------------------------------------------------------------------------
+# input paths: argparse types, so that a missing input is named at parse time (one line,
+# exit 2), before anything is read or compiled
+
+
+def _input(text: str, what: str, *, folder: bool | None) -> str:
+    """`text` if it names an existing input (`folder`: True a folder, False a file, None
+    either), else `argparse.ArgumentTypeError` naming it and what it should be."""
+    path = Path(text)
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f"{what} not found: {text}")
+    if folder is False and path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder; expected a {what}")
+    if folder is True and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a file; expected a {what}")
+    return text
+
+
+def input_file(text: str) -> str:
+    """argparse type: an existing file the command reads."""
+    return _input(text, "file", folder=False)
+
+
+def input_folder(text: str) -> str:
+    """argparse type: an existing folder the command reads."""
+    return _input(text, "folder", folder=True)
+
+
+def input_path(text: str) -> str:
+    """argparse type: an existing file or folder the command reads (a case folder or its
+    file, a probes folder or its output file)."""
+    return _input(text, "file or folder", folder=None)
+
+
+def input_case(text: str) -> str:
+    """argparse type: an existing OpenFOAM case (its folder, a time folder in it, or its
+    ``.foam`` / ``controlDict`` file)."""
+    return _input(text, "OpenFOAM case", folder=None)
+
+
+def field_input(text: str) -> str:
+    """argparse type of ``--field``: an existing CFD field file or mesh folder, or a pattern
+    with a ``{...}`` placeholder (each platform rotation's file is checked by `field_paths`
+    once the rotations are known, still before anything is read)."""
+    return text if "{" in text else _input(text, "CFD field file or folder", folder=None)
+
+
+def input_files(text: str) -> str:
+    """argparse type: one existing file, or several separated by commas (e.g. a HAWC2 box's
+    ``u.bin,v.bin,w.bin``); each is checked."""
+    for part in text.split(","):
+        if part:
+            _input(part, "file", folder=False)
+    return text
 
 
 # ------------------------------------------------------------------------------------------
@@ -236,10 +361,39 @@ def check_output_folder(path, *, files=(), inputs=(), option: str = "--out") -> 
     return out
 
 
+def add_record_arguments(parser, *, records: dict, table: str = "", used: str = "not "
+                         "used") -> None:
+    """The inputs of `correct` and `calibrate`: ``--table`` (a table from `lidarjax table`;
+    `table`: more about it), ``--records`` (`records`: the keywords of its argument, e.g. its
+    help) and ``--min-availability`` (`used`: what happens to records below it)."""
+    parser.add_argument("--table", required=True, type=input_file,
+                        help="response table from `lidarjax table`" + (f" ({table})" if table
+                                                                         else ""))
+    parser.add_argument("--records", required=True, type=input_file, **records)
+    parser.add_argument("--min-availability", type=percentage,
+                        default=DEFAULT_MIN_AVAILABILITY,
+                        help=f"records below this data availability (percent) are {used} "
+                             f"(default {DEFAULT_MIN_AVAILABILITY:g})")
+
+
+def add_settings_argument(parser, detail: str = "") -> None:
+    """The seed's settings.dat, the positional input of the commands that read one (an
+    existing file, checked at parse time); `detail` follows in the help."""
+    parser.add_argument("settings", type=input_file,
+                        help="the seed's settings.dat" + (f" ({detail})" if detail else ""))
+
+
+def add_beta_arguments(parser, *, beta_help: str, all_help: str) -> None:
+    """--beta (one platform rotation, default the settings file's) or --all (every row)."""
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--beta", type=finite_float, help=beta_help)
+    which.add_argument("--all", action="store_true", help=all_help)
+
+
 def add_run_arguments(parser, *, default_scan: str, scan_type=None, scan_help=None) -> None:
     """CFD runs, scan, free stream and probe: shared by `simulate` and `table` (`scan_type`:
     an argparse type for ``--scan`` instead of the profilers' choices)."""
-    parser.add_argument("--field", required=True,
+    parser.add_argument("--field", required=True, type=field_input,
                         help="CFD field file (.npz, .nc or Fluent ASCII); '{beta}' is replaced "
                              "by each platform rotation, e.g. 'runs/platform_{beta}.npz'")
     if scan_type is None:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import warnings
 from pathlib import Path
 
@@ -38,7 +37,14 @@ from ..scanning import (
     stare,
     vad,
 )
-from ._common import SCAN_CHOICES, finite_float, positive_float, positive_int
+from ._common import (
+    SCAN_CHOICES,
+    finite_float,
+    input_file,
+    positive_float,
+    positive_int,
+    warning_line,
+)
 
 #: The scanning presets (`lidarjax.scanning`).
 PRESETS = ("ppi", "rhi", "stare", "vad", "rosette")
@@ -67,11 +73,19 @@ def is_scan_file(name: str) -> bool:
     return str(name).lower() not in PRESETS and is_scanning(name)
 
 
+def scan_source(text: str) -> str:
+    """argparse type of `lidarjax scan`'s scan: a preset or a ``.hpl`` / ``.nc`` scan file,
+    which must exist (any other name is refused when the scan is read)."""
+    if is_scan_file(text):
+        return input_file(text)
+    return text
+
+
 def scan_choice(text: str) -> str:
     """argparse type of ``--scan`` in `simulate` and `series`: a profiler (`SCAN_CHOICES`), a
-    scanning preset or a ``.hpl`` / ``.nc`` scan file (its existence is checked when read)."""
+    scanning preset or an existing ``.hpl`` / ``.nc`` scan file."""
     if text in SCAN_CHOICES or is_scanning(text):
-        return text.lower() if text.lower() in PRESETS else text
+        return text.lower() if text.lower() in PRESETS else scan_source(text)
     suffix = Path(text).suffix
     what = f"a file with suffix {suffix!r}" if suffix else repr(text)
     raise argparse.ArgumentTypeError(
@@ -135,7 +149,7 @@ def read_scan_source(args, *, with_file: bool = False):
             warnings.simplefilter("always")
             scan = read_hpl(path) if suffix == ".hpl" else read_windcube_scan(path)
         for w in caught:
-            print(f"warning: {w.message}", file=sys.stderr)
+            warning_line(args.command, w.message)
         gate = args.gate_length if args.gate_length is not None else float(scan.gate_length)
         return (scan.pattern(), gate, scan) if with_file else (scan.pattern(), gate)
     gate = args.gate_length or INSTRUMENTS[instrument]["gate_length"]

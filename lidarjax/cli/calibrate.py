@@ -6,7 +6,6 @@ import argparse
 import csv
 import json
 import math
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -18,13 +17,21 @@ from ..io import load_table, read_settings
 from ..io.fields import check_field_file, load_field
 from ..response import ProfileTable
 from ..workflows.records import (
-    DEFAULT_MIN_AVAILABILITY,
     load_records,
     match_heights,
     subset_table,
 )
 from ..workflows.seed_tables import SEED_U_REF, table_runs
-from ._common import check_output_file, finite_float, make_probe, make_scan
+from ._common import (
+    add_command,
+    add_record_arguments,
+    check_output_file,
+    finite_float,
+    input_file,
+    make_probe,
+    make_scan,
+    status_line,
+)
 
 
 def _wrt(text: str) -> tuple[str, ...]:
@@ -37,22 +44,21 @@ def _wrt(text: str) -> tuple[str, ...]:
 
 
 def register(sub) -> None:
-    cal = sub.add_parser(
-        "calibrate", help="estimate the installation's north offset and tilt from LOS records",
-        description="Fit constant offsets of the installation (epsilon: north offset, pitch, "
-                    "roll; degrees) to many raw LOS records (.rtd) through the table's forward "
-                    "model, with standard errors and correlations. Without --reference only "
-                    "pitch and roll are identifiable (from the vertical beam and how the "
-                    "apparent vertical wind follows the direction); epsilon needs a reference "
-                    "free stream (mast, other lidar, model). The estimate is compared with the "
-                    "tilt in the record header where it has one.",
+    cal = add_command(
+        sub, "calibrate", run,
+        "estimate the installation's north offset and tilt from LOS records",
+        "Fit constant offsets of the installation (epsilon: north offset, pitch, "
+        "roll; degrees) to many raw LOS records (.rtd) through the table's forward "
+        "model, with standard errors and correlations. Without --reference only "
+        "pitch and roll are identifiable (from the vertical beam and how the "
+        "apparent vertical wind follows the direction); epsilon needs a reference "
+        "free stream (mast, other lidar, model). The estimate is compared with the "
+        "tilt in the record header where it has one.",
         epilog="example: lidarjax calibrate --table site_table.npz --records wls.rtd "
-               "--reference mast.csv --out calibration.json")
-    cal.add_argument("--table", required=True, help="response table from `lidarjax table` "
-                     "(built with the nominal installation)")
-    cal.add_argument("--records", required=True, nargs="+",
-                     help="raw LOS record files (.rtd); several files are pooled")
-    cal.add_argument("--reference", default=None,
+        "--reference mast.csv --out calibration.json")
+    add_record_arguments(cal, table="built with the nominal installation", records={
+        "nargs": "+", "help": "raw LOS record files (.rtd); several files are pooled"})
+    cal.add_argument("--reference", default=None, type=input_file,
                      help="CSV of the reference free stream, columns time,height_m,speed_m_s,"
                           "direction_deg (time as in the records, end of interval, UTC)")
     cal.add_argument("--wrt", type=_wrt, default=CALIBRATION_PARAMETERS,
@@ -68,8 +74,6 @@ def register(sub) -> None:
     cal.add_argument("--parameter", type=finite_float, default=None,
                      help="for a table over a profile parameter: the value to calibrate at "
                           "(default the middle of its range)")
-    cal.add_argument("--min-availability", type=finite_float, default=None,
-                     help="records below this availability (percent) are not used (default 80)")
     cal.add_argument("--exact", action="store_true",
                      help="iterate on the exact geometry: read the table's CFD runs again "
                           "(the settings and field files its metadata names, cropped to where "
@@ -78,13 +82,10 @@ def register(sub) -> None:
                           "fit what is left (lidarjax.calibrate(runs=...)); meshes are sampled "
                           "on their resampling grid, the table too")
     cal.add_argument("--out", default=None, help="write the result as JSON")
-    cal.set_defaults(func=run)
 
 
 def _reference(path: Path, times: np.ndarray, heights: np.ndarray):
     """``(speed, direction)`` ``(r, h)`` from a long-format CSV, NaN where absent."""
-    if not path.is_file():
-        raise FileNotFoundError(f"--reference: file not found: {path}")
     speed = np.full((times.size, heights.size), np.nan)
     direction = np.full((times.size, heights.size), np.nan)
     index = {np.datetime64(t, "s"): i for i, t in enumerate(times)}
@@ -144,31 +145,30 @@ def _table_runs(meta: dict, heights: np.ndarray):
                       roll=float(meta.get("roll_deg", 0.0)))
 
 
-def run(args) -> int:
-    def say(text):
-        print(f"lidarjax calibrate: {text}", file=sys.stderr)
+def _say(text) -> None:
+    status_line("calibrate", text)
 
-    if not Path(args.table).is_file():
-        raise FileNotFoundError(f"--table: table file not found: {args.table}")
-    files = [Path(r) for r in args.records]
-    for f in files:
-        if not f.is_file():
-            raise FileNotFoundError(f"--records: record file not found: {f}")
-    if args.out is not None:
-        check_output_file(Path(args.out), inputs=[("--table", args.table)] + [
-            ("--records", f) for f in files])
+
+def _load_table(args):
+    """The table to calibrate with and its metadata: a table over a profile parameter is
+    taken at ``--parameter`` (default the middle of its range)."""
     table, meta = load_table(args.table, return_metadata=True)
-    over_parameter = isinstance(table, ProfileTable)
-    if over_parameter and args.exact:
-        raise ValueError(f"--exact: {args.table} is a table over {table.name}: its runs are "
-                         "not one set of CFD runs; calibrate without --exact")
-    if over_parameter:
+    if isinstance(table, ProfileTable):
+        if args.exact:
+            raise ValueError(f"--exact: {args.table} is a table over {table.name}: its runs are "
+                             "not one set of CFD runs; calibrate without --exact")
         value = args.parameter if args.parameter is not None else float(
             0.5 * (table.parameters[0] + table.parameters[-1]))
-        say(f"table over {table.name}: calibrating at {table.name} = {value:g}")
+        _say(f"table over {table.name}: calibrating at {table.name} = {value:g}")
         table = table.at(value)
-    min_avail = DEFAULT_MIN_AVAILABILITY if args.min_availability is None else \
-        args.min_availability
+    return table, meta
+
+
+def _read_records(args, files, table):
+    """The raw LOS of every record file at the heights it shares with `table`: ``(los (r, h,
+    b), times (r,), (table index, record index) of the heights, header tilt {name: deg})``;
+    every file must be a ``.rtd`` with the same heights."""
+    min_avail = args.min_availability
     los, times, heights, header = [], [], None, {}
     for f in files:
         rec = load_records(f, period=args.period, min_availability=min_avail)
@@ -187,30 +187,10 @@ def run(args) -> int:
             v = float(getattr(rec, k))
             if math.isfinite(v):
                 header.setdefault(k, v)
-    ti, ri = heights
-    sub = subset_table(table, ti)
-    los = np.concatenate(los)
-    times = np.concatenate(times)
-    z = np.asarray(sub.heights, np.float64)
-    reference = None
-    if args.reference is not None:
-        reference = _reference(Path(args.reference), times, z)
-        matched = int(np.isfinite(reference[1]).sum())
-        say(f"reference: {matched} of {reference[1].size} record-heights matched")
+    return np.concatenate(los), np.concatenate(times), heights, header
 
-    # what calibrate reads: the LOS and the header's tilt
-    recs = SimpleNamespace(los=los, pitch=header.get("pitch", math.nan),
-                           roll=header.get("roll", math.nan))
-    runs = None
-    if args.exact:
-        if "cfd_files" not in meta or "settings" not in meta:
-            raise ValueError(f"--exact: {args.table} does not name its CFD runs (not written "
-                             "by `lidarjax table`); calibrate without --exact")
-        say("--exact: reading the table's CFD runs again ...")
-        runs = _table_runs(meta, z)
-        sub = runs.table()
-    result = calibrate(recs, sub, wrt=args.wrt, reference=reference,
-                       north_offset=args.north_offset, runs=runs)
+
+def _print_result(result, sub, header) -> None:
     print(f"calibration from {int(result.n_records)} records x {sub.n_heights} heights "
           f"({int(result.n_problems)} record-heights used); LOS residual "
           f"{float(result.noise):.3f} m/s")
@@ -220,25 +200,61 @@ def run(args) -> int:
         print("header tilt: " + ", ".join(f"{k} {v:g} deg" for k, v in header.items())
               + " (PitchAngle/RollAngle read in lidarjax's convention; the files do not "
                 "state theirs)")
+
+
+def _write_json(args, files, z, result) -> None:
+    """The calibration as JSON at ``--out`` (atomically)."""
+    doc = {
+        "table": str(args.table), "records": [str(f) for f in files],
+        "reference": args.reference, "heights_m": [float(v) for v in z],
+        "names": list(result.names),
+        "offset_deg": [float(v) for v in np.asarray(result.offset)],
+        "value_deg": [float(v) for v in np.asarray(result.value)],
+        "nominal_deg": [float(v) for v in np.asarray(result.nominal)],
+        "std_deg": [float(v) for v in np.asarray(result.std)],
+        "correlation": np.asarray(result.correlation).tolist(),
+        "identifiable": [bool(v) for v in np.asarray(result.identifiable)],
+        "header_deg": [float(v) for v in np.asarray(result.header)],
+        "n_records": int(result.n_records), "n_problems": int(result.n_problems),
+        "noise_m_s": float(result.noise), "converged": result.converged,
+        "flags": int(result.flags), "passes": int(result.num_steps),
+        "north_offset": args.north_offset, "rebuilds": int(result.rebuilds),
+        "notes": list(result.notes),
+    }
+    with atomic_path(Path(args.out)) as tmp:
+        Path(tmp).write_text(json.dumps(doc, indent=1, allow_nan=True) + "\n")
+    print(f"wrote {args.out}")
+
+
+def run(args) -> int:
+    files = [Path(r) for r in args.records]  # they and --table exist (checked when parsed)
     if args.out is not None:
-        doc = {
-            "table": str(args.table), "records": [str(f) for f in files],
-            "reference": args.reference, "heights_m": [float(v) for v in z],
-            "names": list(result.names),
-            "offset_deg": [float(v) for v in np.asarray(result.offset)],
-            "value_deg": [float(v) for v in np.asarray(result.value)],
-            "nominal_deg": [float(v) for v in np.asarray(result.nominal)],
-            "std_deg": [float(v) for v in np.asarray(result.std)],
-            "correlation": np.asarray(result.correlation).tolist(),
-            "identifiable": [bool(v) for v in np.asarray(result.identifiable)],
-            "header_deg": [float(v) for v in np.asarray(result.header)],
-            "n_records": int(result.n_records), "n_problems": int(result.n_problems),
-            "noise_m_s": float(result.noise), "converged": result.converged,
-            "flags": int(result.flags), "passes": int(result.num_steps),
-            "north_offset": args.north_offset, "rebuilds": int(result.rebuilds),
-            "notes": list(result.notes),
-        }
-        with atomic_path(Path(args.out)) as tmp:
-            Path(tmp).write_text(json.dumps(doc, indent=1, allow_nan=True) + "\n")
-        print(f"wrote {args.out}")
+        check_output_file(Path(args.out), inputs=[("--table", args.table)] + [
+            ("--records", f) for f in files])
+    table, meta = _load_table(args)
+    los, times, (ti, _), header = _read_records(args, files, table)
+    sub = subset_table(table, ti)
+    z = np.asarray(sub.heights, np.float64)
+    reference = None
+    if args.reference is not None:
+        reference = _reference(Path(args.reference), times, z)
+        matched = int(np.isfinite(reference[1]).sum())
+        _say(f"reference: {matched} of {reference[1].size} record-heights matched")
+
+    # what calibrate reads: the LOS and the header's tilt
+    recs = SimpleNamespace(los=los, pitch=header.get("pitch", math.nan),
+                           roll=header.get("roll", math.nan))
+    runs = None
+    if args.exact:
+        if "cfd_files" not in meta or "settings" not in meta:
+            raise ValueError(f"--exact: {args.table} does not name its CFD runs (not written "
+                             "by `lidarjax table`); calibrate without --exact")
+        _say("--exact: reading the table's CFD runs again ...")
+        runs = _table_runs(meta, z)
+        sub = runs.table()
+    result = calibrate(recs, sub, wrt=args.wrt, reference=reference,
+                       north_offset=args.north_offset, runs=runs)
+    _print_result(result, sub, header)
+    if args.out is not None:
+        _write_json(args, files, z, result)
     return 0

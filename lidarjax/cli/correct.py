@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -13,7 +12,6 @@ from ..io import load_table
 from ..response import ProfileTable
 from ..workflows.joint_records import correct_records_joint
 from ..workflows.records import (
-    DEFAULT_MIN_AVAILABILITY,
     check_instrument,
     correct_records,
     load_records,
@@ -23,21 +21,30 @@ from ..workflows.records import (
     write_corrected_csv,
     write_corrected_netcdf,
 )
-from ._common import check_output_file, finite_float, positive_float
+from ._common import (
+    add_command,
+    add_record_arguments,
+    check_output_file,
+    finite_float,
+    positive_float,
+    status_line,
+    warning_line,
+)
 
 
 def register(sub) -> None:
-    cor = sub.add_parser(
-        "correct", help="invert lidar records for the free-stream wind with a response table",
-        description="Read Windcube .sta/.rtd or ZephIR .csv records, check the instrument "
-                    "against the table, invert every record and height the table has, and "
-                    "write corrected speed, direction, uncertainty and flags as CSV and CF "
-                    "NetCDF, written atomically. Bad records "
-                    "come back NaN with a reason in the flags column.",
+    cor = add_command(
+        sub, "correct", run,
+        "invert lidar records for the free-stream wind with a response table",
+        "Read Windcube .sta/.rtd or ZephIR .csv records, check the instrument "
+        "against the table, invert every record and height the table has, and "
+        "write corrected speed, direction, uncertainty and flags as CSV and CF "
+        "NetCDF, written atomically. Bad records "
+        "come back NaN with a reason in the flags column.",
         epilog="example: lidarjax correct --table site_table.npz --records "
-               "wls7_2020_10_07.sta --out corrected.csv")
-    cor.add_argument("--table", required=True, help="response table from `lidarjax table`")
-    cor.add_argument("--records", required=True, help=".sta, .stdsta, .rtd or ZephIR .csv")
+        "wls7_2020_10_07.sta --out corrected.csv")
+    add_record_arguments(cor, records={"help": ".sta, .stdsta, .rtd or ZephIR .csv"},
+                         used="flagged and not used")
     cor.add_argument("--out", default=None, help="output CSV (default: <records>_corrected.csv); "
                      "an existing file is replaced atomically, an input never")
     cor.add_argument("--netcdf", default=None, help="CF NetCDF output (default: the CSV's name "
@@ -53,9 +60,6 @@ def register(sub) -> None:
     cor.add_argument("--cnr-threshold", type=finite_float, default=None,
                      help="CNR threshold in dB for .rtd samples (default: the file header's "
                           "CNRThreshold)")
-    cor.add_argument("--min-availability", type=finite_float, default=None,
-                     help="records below this data availability (percent) are flagged and not "
-                          "used (default 80)")
     cor.add_argument("--allow-mismatch", action="store_true",
                      help="correct although the record header disagrees with the table (scan, "
                           "cone angle, direction offset); the mismatch is printed")
@@ -67,7 +71,6 @@ def register(sub) -> None:
                           "the CSV as <out>_profile.csv. A table without a profile axis is "
                           "corrected per height (said in one line)")
     cor.add_argument("--quiet", action="store_true", help="no progress lines")
-    cor.set_defaults(func=run)
 
 
 def write_profile_csv(path, time, joint, name, profile) -> None:
@@ -91,17 +94,10 @@ def write_profile_csv(path, time, joint, name, profile) -> None:
 
 def run(args) -> int:
     def say(text):
-        print(f"lidarjax correct: {text}", file=sys.stderr)
+        status_line("correct", text)
 
-    records = Path(args.records)
-    if not records.is_file():
-        raise FileNotFoundError(f"--records: record file not found: {records}")
-    if not Path(args.table).is_file():
-        raise FileNotFoundError(f"--table: table file not found: {args.table}")
-    min_avail = DEFAULT_MIN_AVAILABILITY if args.min_availability is None else \
-        args.min_availability
-    if not 0.0 <= min_avail <= 100.0:
-        raise ValueError(f"--min-availability must be a percentage in [0, 100], got {min_avail}")
+    records = Path(args.records)  # it and --table exist (checked when parsed)
+    min_avail = args.min_availability  # a percentage (checked when parsed)
     inputs = [("--table", args.table), ("--records", records)]
     out = Path(args.out) if args.out else records.with_name(records.stem + "_corrected.csv")
     check_output_file(out, inputs=inputs)
@@ -125,11 +121,11 @@ def run(args) -> int:
                          f"{'; '.join(mismatch)} (rebuild the table for this instrument, or "
                          "pass --allow-mismatch)")
     for w in rec.warnings:  # after the refusals: a refused file gets one line
-        say(f"warning: {w}")
+        warning_line("correct", w)
     for w in table_warnings(meta):
-        say(f"warning: {w}")
+        warning_line("correct", w)
     for m in mismatch:
-        say(f"warning: mismatch allowed: {m}")
+        warning_line("correct", f"mismatch allowed: {m}")
     tilt = tilt_difference(meta, rec)
     if tilt:
         say(tilt)

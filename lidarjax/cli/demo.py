@@ -6,20 +6,20 @@ import json
 from pathlib import Path
 
 from ..workflows.demo import run_demo
+from ._common import add_command
 
 
 def register(sub) -> None:
-    demo = sub.add_parser(
-        "demo", help="run the whole job on the built-in platform scene, no input files",
-        description="Simulate Windcube V1/V2 and ZephIR on the built-in hemisphere 'platform' "
-                    "(12 platform rotations), write seed files, a response table, a month of "
-                    "synthetic .sta records and their correction, and the figures.",
+    demo = add_command(
+        sub, "demo", run,
+        "run the whole job on the built-in platform scene, no input files",
+        "Simulate Windcube V1/V2 and ZephIR on the built-in hemisphere 'platform' "
+        "(12 platform rotations), write seed files, a response table, a month of "
+        "synthetic .sta records and their correction, and the figures.",
         epilog="example: lidarjax demo --out lidarjax-demo")
     demo.add_argument("--out", default="lidarjax-demo", help="output folder (default: "
                                                              "lidarjax-demo)")
     demo.add_argument("--no-plots", action="store_true", help="skip the figures")
-    demo.set_defaults(func=run)
-
 
 
 def run(args) -> int:

@@ -31,7 +31,9 @@ from ..io.fields import check_field_file, load_field
 from ..mount import Mount
 from ..progress import LineProgress
 from ._common import (
+    add_command,
     add_run_arguments,
+    add_settings_argument,
     check_output_folder,
     field_paths,
     finite_float,
@@ -86,24 +88,24 @@ def bounds_arg(text: str):
 
 
 def register(sub) -> None:
-    des = sub.add_parser(
-        "design", help="where to put the lidar: its location (and cone angle, heading) "
-                       "optimised over all inflow directions through the forward model",
-        description="Optimise the location of the lidar of a seed settings.dat in a region "
-                    "(a box, or a polygon at a height above the surface read from the CFD "
-                    "grid's solid nodes) so that the correction |C_U - 1| and the direction "
-                    "error (worst case or RMS over directions and heights), or the "
-                    "installation-uncertainty budget of C_U, are smallest: a coarse grid, then "
-                    "BFGS through exact gradients from the best candidates, one compiled "
-                    "program (kept in the compilation cache). Writes settings_design.dat (the "
-                    "settings with the best location in the beta's row), roses.csv, "
-                    "objective_map.csv and design.png.",
+    des = add_command(
+        sub, "design", run,
+        "where to put the lidar: its location (and cone angle, heading) "
+        "optimised over all inflow directions through the forward model",
+        "Optimise the location of the lidar of a seed settings.dat in a region "
+        "(a box, or a polygon at a height above the surface read from the CFD "
+        "grid's solid nodes) so that the correction |C_U - 1| and the direction "
+        "error (worst case or RMS over directions and heights), or the "
+        "installation-uncertainty budget of C_U, are smallest: a coarse grid, then "
+        "BFGS through exact gradients from the best candidates, one compiled "
+        "program (kept in the compilation cache). Writes settings_design.dat (the "
+        "settings with the best location in the beta's row), roses.csv, "
+        "objective_map.csv and design.png.",
         epilog="example: lidarjax design settings.dat --field case/ --u-ref 10,0,0 "
-               "--region polygon:90,120,102,120,102,134,90,134 --height-above-surface 1 "
-               "--objective worst --out design/",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    des.add_argument("settings", help="the seed's settings.dat (angles, heights, the lidar's "
-                                      "location as the initial guess)")
+        "--region polygon:90,120,102,120,102,134,90,134 --height-above-surface 1 "
+        "--objective worst --out design/",
+        raw=True)
+    add_settings_argument(des, "angles, heights, the lidar's location as the initial guess")
     des.add_argument("--beta", type=finite_float, help="the run's platform rotation (default: "
                                                        "the settings file's beta)")
     add_run_arguments(des, default_scan="windcube_v1")
@@ -149,7 +151,6 @@ def register(sub) -> None:
     des.add_argument("--map", type=positive_int, default=30, metavar="N",
                      help="objective map on N x N points of the region (default 30; 1: none)")
     des.add_argument("--out", default=".", help="output folder (default: .)")
-    des.set_defaults(func=run)
 
 
 def _rotations(text):

@@ -39,7 +39,12 @@ from ..workflows.farm_study import (
     farm_study,
     write_farm_study,
 )
-from ._common import finite_float, positive_float
+from ._common import (
+    add_command,
+    finite_float,
+    input_file,
+    positive_float,
+)
 
 SCANS = FARM_SCANS
 
@@ -66,15 +71,17 @@ def _floats(text: str):
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "farm", help="a lidar among wind turbines: wakes, correction roses, disturbed sectors",
-        description="Simulate a ground or nacelle lidar in a wind farm's wakes for every inflow "
-                    "direction; write correction roses with the IEC disturbed sectors shaded, a "
-                    "wake map, per-direction tables, yaw gradients and probe points.",
+    p = add_command(
+        sub, "farm", run,
+        "a lidar among wind turbines: wakes, correction roses, disturbed sectors",
+        "Simulate a ground or nacelle lidar in a wind farm's wakes for every inflow "
+        "direction; write correction roses with the IEC disturbed sectors shaded, a "
+        "wake map, per-direction tables, yaw gradients and probe points.",
         epilog="example: lidarjax farm farm.txt --turbine nrel5mw.csv --lidar 252000 646300 0 "
-               "--scan windcube_v2 --speed 10 --directions 0:360:2 --out farm_out")
-    p.add_argument("layouts", nargs="+", help="layout file(s): '<name> <easting> <northing>' lines")
-    p.add_argument("--turbine", action="append", required=True,
+        "--scan windcube_v2 --speed 10 --directions 0:360:2 --out farm_out")
+    p.add_argument("layouts", nargs="+", type=input_file,
+                   help="layout file(s): '<name> <easting> <northing>' lines")
+    p.add_argument("--turbine", action="append", required=True, type=input_file,
                    help="turbine type CSV (# rotor_diameter, # hub_height, speed,ct columns); "
                         "once for all layouts or once per layout")
     where = p.add_mutually_exclusive_group(required=True)
@@ -110,7 +117,6 @@ def register(sub) -> None:
                    help="direction of the wake map and probe points (default: the direction "
                         "with the largest speed correction)")
     p.add_argument("--out", required=True, help="output folder (created)")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:

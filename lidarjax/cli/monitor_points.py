@@ -35,10 +35,15 @@ from ..workflows.monitor_points import monitor_points, simulate_from_monitor_poi
 from ..workflows.seed_results import write_seed_results
 from ..workflows.seed_tables import settings_mount, settings_probes, table_region
 from ._common import (
+    add_beta_arguments,
+    add_command,
     add_probe_arguments,
+    add_settings_argument,
     add_tilt_arguments,
+    field_input,
     field_paths,
     finite_float,
+    input_path,
     make_probe,
     make_scan,
     positive_float,
@@ -61,32 +66,31 @@ def _heights(text: str) -> list[float]:
 
 
 def register(sub) -> None:
-    pr = sub.add_parser(
-        "monitor-points", aliases=["probes"],
-        help="write the lidar's sample points as CFD monitor points (OpenFOAM probes, zCFD, "
-             "CSV), "
-                       "or simulate from the CFD code's samples (--sampled)",
-        description="Write the beam focus points (or probe-volume quadrature nodes) and the "
-                    "point-reference column of every selected mount of a seed settings.dat as "
-                    "an OpenFOAM probes function object (<out>/<name>), a zCFD probe file "
-                    "(<out>/<name>_zcfd.py, turb_probe layout) and CSV (<out>/<name>.csv). "
-                    "Each probe is named <mount>_h<height>_beam<b>_q<node>. With --field CFD "
-                    "the nodes are those 'lidarjax simulate --field CFD' samples, every beta "
-                    "its own (one points list: each mount's points in turn). With --sampled, "
-                    "read the values the CFD code sampled there instead (checked rotation "
-                    "by rotation against the points these options give) and write the seed "
-                    "output files, as 'lidarjax simulate' does.",
+    pr = add_command(
+        sub, "monitor-points", run,
+        "write the lidar's sample points as CFD monitor points (OpenFOAM probes, zCFD, "
+        "CSV), "
+        "or simulate from the CFD code's samples (--sampled)",
+        "Write the beam focus points (or probe-volume quadrature nodes) and the "
+        "point-reference column of every selected mount of a seed settings.dat as "
+        "an OpenFOAM probes function object (<out>/<name>), a zCFD probe file "
+        "(<out>/<name>_zcfd.py, turb_probe layout) and CSV (<out>/<name>.csv). "
+        "Each probe is named <mount>_h<height>_beam<b>_q<node>. With --field CFD "
+        "the nodes are those 'lidarjax simulate --field CFD' samples, every beta "
+        "its own (one points list: each mount's points in turn). With --sampled, "
+        "read the values the CFD code sampled there instead (checked rotation "
+        "by rotation against the points these options give) and write the seed "
+        "output files, as 'lidarjax simulate' does.",
         epilog="example: lidarjax monitor-points settings.dat --all --scan windcube_v2 --probe pulsed "
-               "--field 'runs/b{beta}' --out probes/ ; cp probes/lidarProbes case/system/ ; "
-               "(cd case && postProcess -func lidarProbes -latestTime) ; lidarjax monitor-points "
-               "settings.dat --all --scan windcube_v2 --probe pulsed --field 'runs/b{beta}' "
-               "--sampled case/postProcessing/lidarProbes --out results/",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    pr.add_argument("settings", help="the seed's settings.dat")
-    which = pr.add_mutually_exclusive_group()
-    which.add_argument("--beta", type=finite_float, help="platform rotation (default: the settings "
-                                                 "file's beta)")
-    which.add_argument("--all", action="store_true", help="every beta row of the settings")
+        "--field 'runs/b{beta}' --out probes/ ; cp probes/lidarProbes case/system/ ; "
+        "(cd case && postProcess -func lidarProbes -latestTime) ; lidarjax monitor-points "
+        "settings.dat --all --scan windcube_v2 --probe pulsed --field 'runs/b{beta}' "
+        "--sampled case/postProcessing/lidarProbes --out results/",
+        aliases=["probes"],
+        raw=True)
+    add_settings_argument(pr)
+    add_beta_arguments(pr, beta_help="platform rotation (default: the settings file's beta)",
+                       all_help="every beta row of the settings")
     pr.add_argument("--scan", choices=SCAN_CHOICES, default="windcube_v2")
     add_tilt_arguments(pr)
     pr.add_argument("--cone-angle", type=positive_float, default=None,
@@ -96,7 +100,7 @@ def register(sub) -> None:
                          "settings' j * height / nh)")
     add_probe_arguments(pr)
     nodes = pr.add_mutually_exclusive_group()
-    nodes.add_argument("--field", default=None, metavar="CFD",
+    nodes.add_argument("--field", default=None, metavar="CFD", type=field_input,
                        help="the CFD run(s) `lidarjax simulate --field` would read ('{beta}' "
                             "for several betas): the probe's nodes are chosen for its "
                             "resolution as simulate chooses them, so both routes sample the "
@@ -111,7 +115,7 @@ def register(sub) -> None:
                     help="function-object name and file stem (default lidarProbes)")
     pr.add_argument("--frequency", type=positive_int, default=100,
                     help="zCFD report frequency, solver cycles (default 100)")
-    pr.add_argument("--sampled", default=None,
+    pr.add_argument("--sampled", default=None, type=input_path,
                     help="read mode: OpenFOAM probes output (postProcessing/<name>, a time "
                          "folder or its U file) or a CSV with columns name,u,v,w")
     pr.add_argument("--time", type=finite_float, default=None,
@@ -119,7 +123,6 @@ def register(sub) -> None:
     pr.add_argument("--u-ref", type=vector, default=(-15.0, 0.0, 0.0),
                     help="read mode: free stream u,v,w in the CFD frame, m/s (default -15,0,0)")
     pr.add_argument("--out", required=True, help="output folder")
-    pr.set_defaults(func=run)
 
 
 def _configuration(args):

@@ -19,7 +19,13 @@ from ..mount import Mount
 from ..probe import PointProbe
 from ..scanning import instrument_probe, scan_points, simulate_scan, simulate_scan_series
 from ..scenes import uniform
-from ._common import check_output_file, finite_float, positive_int
+from ._common import (
+    add_command,
+    check_output_file,
+    field_input,
+    finite_float,
+    positive_int,
+)
 from ._scanning import (
     PRESETS,
     add_scan_pattern_arguments,
@@ -29,6 +35,7 @@ from ._scanning import (
     plot_scan,
     read_scan_source,
     scan_region,
+    scan_source,
 )
 
 __all__ = ["PRESETS", "make_pattern", "plot_scan", "register", "run"]
@@ -55,21 +62,22 @@ def _wind(text: str) -> tuple[float, float]:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "scan", help="a scanning lidar (PPI, RHI, stare, VAD, rosette or a scan file) in a field",
-        description="Simulate a scanning lidar: a preset or the layout of a Halo .hpl / Windcube "
-                    ".nc scan file, in a uniform wind or a CFD field; write CF NetCDF (time x "
-                    "beam x range) and plot the PPI on its cone or the RHI on its plane.",
+    p = add_command(
+        sub, "scan", run,
+        "a scanning lidar (PPI, RHI, stare, VAD, rosette or a scan file) in a field",
+        "Simulate a scanning lidar: a preset or the layout of a Halo .hpl / Windcube "
+        ".nc scan file, in a uniform wind or a CFD field; write CF NetCDF (time x "
+        "beam x range) and plot the PPI on its cone or the RHI on its plane.",
         epilog="example: lidarjax scan ppi --elevation 3 --n-rays 72 --gates 100 --wind 8,270 "
-               "--out ppi.nc --plot ppi.png",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scan", help=f"a preset ({', '.join(PRESETS)}) or a .hpl / .nc scan file")
+        "--out ppi.nc --plot ppi.png",
+        raw=True)
+    p.add_argument("scan", type=scan_source, help=f"a preset ({', '.join(PRESETS)}) or a .hpl / .nc scan file")
     add_scan_pattern_arguments(p, sector=("--start", "--stop"))
     p.add_argument("--point-probe", action="store_true", help="sample gate centres only")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--wind", type=_wind, default=(10.0, 270.0),
                      help="uniform wind 'SPEED,DIRECTION' (m/s, meteorological degrees)")
-    src.add_argument("--field", help="a CFD field file (.npz, .nc, ...) instead of --wind")
+    src.add_argument("--field", type=field_input, help="a CFD field file (.npz, .nc, ...) instead of --wind")
     p.add_argument("--location", type=_triple, default=(0.0, 0.0, 0.0), help="lidar 'x,y,z' (m)")
     p.add_argument("--beta", type=finite_float, default=0.0, help="mount rotation, degrees")
     p.add_argument("--pitch", type=finite_float, default=0.0, help="degrees (nacelle: -90)")
@@ -79,7 +87,6 @@ def register(sub) -> None:
     p.add_argument("--plot", default=None,
                    help="PNG of the scan as radar displays draw it (filled gate cells, range rings); "
                         "for a scan file, its own measured Doppler beside the simulated")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:

@@ -7,7 +7,6 @@ The budgets are `lidarjax.sensitivity_report` and the files `lidarjax.write_sens
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,9 @@ from ..io.seed_output import format_number
 from ..sensitivity import INPUTS, OUTPUTS
 from ..workflows.sensitivity_report import sensitivity_report, write_sensitivity_report
 from ._common import (
+    add_command,
     add_run_arguments,
+    add_settings_argument,
     field_paths,
     make_probe,
     make_scan,
@@ -29,21 +30,22 @@ DEFAULT_OUTPUTS = "lidar_speed,lidar_direction,cff_U,cff_th"
 
 
 def register(sub) -> None:
-    sen = sub.add_parser(
-        "sensitivity", help="uncertainty budgets of the lidar's outputs from installation "
-                            "uncertainties (GUM through exact gradients)",
-        description="For every platform rotation (beta row) of a seed settings.dat, in one "
-                    "compiled batch: the Jacobians of the lidar's outputs with respect to the "
-                    "installation inputs given with --std, the combined standard uncertainty "
-                    "per height (GUM law of propagation) and each input's contribution. Prints "
-                    "a budget table per beta and height, writes one CSV per output and plots "
-                    "(budget bars per height, sensitivity profiles against z/H).",
+    sen = add_command(
+        sub, "sensitivity", run,
+        "uncertainty budgets of the lidar's outputs from installation "
+        "uncertainties (GUM through exact gradients)",
+        "For every platform rotation (beta row) of a seed settings.dat, in one "
+        "compiled batch: the Jacobians of the lidar's outputs with respect to the "
+        "installation inputs given with --std, the combined standard uncertainty "
+        "per height (GUM law of propagation) and each input's contribution. Prints "
+        "a budget table per beta and height, writes one CSV per output and plots "
+        "(budget bars per height, sensitivity profiles against z/H).",
         epilog="example: lidarjax sensitivity settings.dat --field 'runs/platform_{beta}.npz' "
-               "--std epsilon=0.5 --std pitch=0.2 --std roll=0.2 --std location=0.05 "
-               "--out budget/\n\ninputs: location (or x, y, z; m), beta, gamma, psi, epsilon, "
-               "pitch, roll, cone_angle (deg), heights (m), speed (m/s of the free stream)",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    sen.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
+        "--std epsilon=0.5 --std pitch=0.2 --std roll=0.2 --std location=0.05 "
+        "--out budget/\n\ninputs: location (or x, y, z; m), beta, gamma, psi, epsilon, "
+        "pitch, roll, cone_angle (deg), heights (m), speed (m/s of the free stream)",
+        raw=True)
+    add_settings_argument(sen, "all beta rows are used")
     add_run_arguments(sen, default_scan="windcube_v2")
     sen.add_argument("--std", action="append", default=[], metavar="NAME=VALUE",
                      help="standard uncertainty of an input, in its unit (repeatable): e.g. "
@@ -64,7 +66,6 @@ def register(sub) -> None:
                           "the CFD z = 0)")
     sen.add_argument("--out", default=".", help="output folder (default: .)")
     sen.add_argument("--no-plots", action="store_true", help="skip the figures")
-    sen.set_defaults(func=run)
 
 
 def parse_std(items) -> dict:

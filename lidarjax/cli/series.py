@@ -44,13 +44,20 @@ from ..timing import schedule_for
 from ..workflows.series_report import write_series_csv, write_series_report
 from ..workflows.series_run import mean_wind_above, series_field
 from ._common import (
+    add_command,
     add_probe_arguments,
+    add_settings_argument,
     check_output_folder,
+    field_input,
     finite_float,
+    input_case,
+    input_file,
+    input_files,
     make_probe,
     make_scan,
     positive_float,
     positive_int,
+    print_height_means,
     vector,
 )
 from ._scanning import (
@@ -78,42 +85,56 @@ def _ints(text: str) -> tuple[int, int, int]:
     return values
 
 
+def _mean_flow(text: str) -> str:
+    """argparse type of ``--field``: 'uniform' or an existing CFD field file or mesh."""
+    return text if text == "uniform" else field_input(text)
+
+
 def register(sub) -> None:
-    p = sub.add_parser(
-        "series", help="simulated 10-minute statistics (.sta) in frozen turbulence over a mean flow",
-        description="Simulate every line of sight at the time it is taken through a turbulence "
-                    "box advected over a mean flow (Taylor), build the instrument's "
-                    "reconstructions and reduce them to 10-minute statistics: a simulated .sta "
-                    "(speed, dispersion, min, max, direction, Z-wind, availability), a CSV with "
-                    "lidar, cup and sonic statistics, and a figure of lidar TI against point TI "
-                    "per height. The lidar location and heights come from the seed settings.dat.",
+    p = add_command(
+        sub, "series", run,
+        "simulated 10-minute statistics (.sta) in frozen turbulence over a mean flow",
+        "Simulate every line of sight at the time it is taken through a turbulence "
+        "box advected over a mean flow (Taylor), build the instrument's "
+        "reconstructions and reduce them to 10-minute statistics: a simulated .sta "
+        "(speed, dispersion, min, max, direction, Z-wind, availability), a CSV with "
+        "lidar, cup and sonic statistics, and a figure of lidar TI against point TI "
+        "per height. The lidar location and heights come from the seed settings.dat.",
         epilog="examples:\n"
-               "  lidarjax series settings.dat --field uniform --speed 10 --direction 270 "
-               "--generate-box 512,32,32 --out series/\n"
-               "  lidarjax series settings.dat --field run.npz --box turb.bts --scan zephir "
-               "--hours 6 --out series/\n"
-               "  lidarjax series settings.dat --field run.npz --box u.bin,v.bin,w.bin "
-               "--box-shape 8192,32,32 --box-spacing 2,4,4 --out series/\n"
-               "  lidarjax series settings.dat --field uniform --speed 8 --direction 270 "
-               "--generate-box 512,32,32 --scan vad --elevation 60 --gates 40 --scans 20 "
-               "--out vad/\n\n"
-               "A scanning --scan (a preset or a .hpl / .nc scan file) is flown through the "
-               "same field in time instead: --scans N repetitions (default: as many as cover "
-               "--hours). It writes series_scan.nc (CF NetCDF, time x beam x range: LOS, ray "
-               "times, azimuth, elevation, flags), series_scan.png (the last scan on its cone or "
-               "plane; not with --no-plots) and, for a PPI or VAD of 3 rays or more, "
-               "series_vad.csv (each scan's VAD wind profile per gate). The 10-minute .sta "
-               "statistics are the profilers' and "
-               "are not written for a scanning scan.",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("settings", help="the seed's settings.dat (location, angles, heights)")
+        "  lidarjax series settings.dat --field uniform --speed 10 --direction 270 "
+        "--generate-box 512,32,32 --out series/\n"
+        "  lidarjax series settings.dat --field run.npz --box turb.bts --scan zephir "
+        "--hours 6 --out series/\n"
+        "  lidarjax series settings.dat --field run.npz --box u.bin,v.bin,w.bin "
+        "--box-shape 8192,32,32 --box-spacing 2,4,4 --out series/\n"
+        "  lidarjax series settings.dat --field uniform --speed 8 --direction 270 "
+        "--generate-box 512,32,32 --scan vad --elevation 60 --gates 40 --scans 20 "
+        "--out vad/\n\n"
+        "A scanning --scan (a preset or a .hpl / .nc scan file) is flown through the "
+        "same field in time instead: --scans N repetitions (default: as many as cover "
+        "--hours). It writes series_scan.nc (CF NetCDF, time x beam x range: LOS, ray "
+        "times, azimuth, elevation, flags), series_scan.png (the last scan on its cone or "
+        "plane; not with --no-plots) and, for a PPI or VAD of 3 rays or more, "
+        "series_vad.csv (each scan's VAD wind profile per gate). The 10-minute .sta "
+        "statistics are the profilers' and "
+        "are not written for a scanning scan.",
+        raw=True)
+    add_settings_argument(p, "location, angles, heights")
     p.add_argument("--beta", type=finite_float, default=None,
                    help="platform rotation row to use (default: the file's beta)")
-    p.add_argument("--field", default=None,
+    _flow_arguments(p)
+    _box_arguments(p)
+    _instrument_arguments(p)
+    _output_arguments(p)
+
+
+def _flow_arguments(p) -> None:
+    """The mean flow (--field) or an unsteady run's snapshots (--sequence)."""
+    p.add_argument("--field", default=None, type=_mean_flow,
                    help="mean flow: a CFD field file (.npz, .nc, Fluent ASCII), an OpenFOAM case "
                         "or VTK mesh (its own cellPoint at the points a fixed lidar samples), or "
                         "'uniform' (uniform wind of --speed from --direction)")
-    p.add_argument("--sequence", default=None, metavar="CASE",
+    p.add_argument("--sequence", default=None, metavar="CASE", type=input_case,
                    help="instead of --field and a box: an OpenFOAM case of an unsteady run (LES, "
                         "URANS); the profiler flies through its time directories, each LOS at its "
                         "own time (linear between snapshots; a fixed lidar exact, the mesh's own "
@@ -123,9 +144,14 @@ def register(sub) -> None:
                    help="--sequence: the snapshots between these times (s) only (default all)")
     p.add_argument("--max-snapshots", type=positive_int, default=8,
                    help="--sequence: the most snapshots held in memory at once (default 8)")
+
+
+def _box_arguments(p) -> None:
+    """The turbulence box (read or generated) and its advection."""
     box = p.add_mutually_exclusive_group()
-    box.add_argument("--box", help="turbulence box: a TurbSim .bts file, or three HAWC2 "
-                                   "binary files 'u.bin,v.bin,w.bin' (with --box-shape)")
+    box.add_argument("--box", type=input_files,
+                     help="turbulence box: a TurbSim .bts file, or three HAWC2 binary files "
+                          "'u.bin,v.bin,w.bin' (with --box-shape)")
     box.add_argument("--generate-box", type=_ints, metavar="NX,NY,NZ",
                      help="generate a periodic Mann box of this many nodes")
     p.add_argument("--box-shape", type=_ints, default=None, help="HAWC2 box nodes nx,ny,nz")
@@ -145,6 +171,10 @@ def register(sub) -> None:
     p.add_argument("--direction", type=finite_float, default=None,
                    help="advection direction, degrees from CFD +y, meteorological (default: "
                         "the mean flow's there)")
+
+
+def _instrument_arguments(p) -> None:
+    """The instrument: scan, timing, tilt, motion and probe volume."""
     p.add_argument("--scan", type=scan_choice, default="windcube_v2",
                    help="a profiler (windcube_v1, windcube_v2 default, zephir), a scanning "
                         "preset (ppi, rhi, stare, vad, rosette) or a Halo .hpl / Windcube .nc "
@@ -156,10 +186,14 @@ def register(sub) -> None:
                         "0.02 s)")
     p.add_argument("--tilt-compensation", action="store_true",
                    help="the instrument corrects its reconstruction for its tilt")
-    p.add_argument("--motion", default=None,
+    p.add_argument("--motion", default=None, type=input_file,
                    help="platform motion log CSV (time,surge,sway,heave,pitch,roll,yaw)")
     add_probe_arguments(p)
     p.set_defaults(probe="auto")
+
+
+def _output_arguments(p) -> None:
+    """The simulated span, batching and outputs, and the scanning scans' pattern."""
     p.add_argument("--start", default="2024-01-01T00:00",
                    help="date and time of the first record's start (default 2024-01-01T00:00)")
     p.add_argument("--hours", type=positive_float, default=24.0,
@@ -172,7 +206,6 @@ def register(sub) -> None:
     add_scan_pattern_arguments(p, title="scanning scans (a preset or a scan file)")
     p.add_argument("--scans", type=positive_int, default=None,
                    help="scanning scans: repetitions flown (default: as many as cover --hours)")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:
@@ -243,12 +276,10 @@ def run(args) -> int:
     res = write_series_report(Path(args.out), stats, heights, starts, start_datetime=start,
                               scan=scan, metadata=meta, plots=not args.no_plots,
                               label=args.scan)
-    print(f"{'height':>7s} {'U_lidar':>8s} {'TI_lidar':>9s} {'TI_cup':>7s} {'TI_sonic':>9s} "
-          f"{'avail%':>7s}")
-    for k, h in enumerate(heights):
-        print(f"{h:7.1f} {np.nanmean(stats.speed[:, k]):8.3f} {np.nanmean(stats.ti[:, k]):9.4f} "
-              f"{np.nanmean(stats.cup_ti[:, k]):7.4f} {np.nanmean(stats.sonic_ti[:, k]):9.4f} "
-              f"{np.nanmean(stats.availability[:, k]):7.1f}")
+    print_height_means(heights, {"U_lidar": (stats.speed, 8, 3), "TI_lidar": (stats.ti, 9, 4),
+                                 "TI_cup": (stats.cup_ti, 7, 4),
+                                 "TI_sonic": (stats.sonic_ti, 9, 4),
+                                 "avail%": (stats.availability, 7, 1)})
     wrote = [str(res["sta"]), str(res["csv"])] + ([str(res["plot"])] if res["plot"] else [])
     print("wrote " + ", ".join(wrote) + (f" ({res['note']})" if res["note"] else ""))
     return 0
@@ -311,11 +342,9 @@ def run_sequence(args, settings, beta, location, heights, start) -> int:
     meta = {"settings": str(args.settings), "sequence": str(args.sequence), "scan": args.scan,
             "beta_deg": beta, "start": str(start), "snapshots": len(seq)}
     res = write_series_csv(out, series, metadata=meta)
-    speed = np.asarray(series.speed)
-    print(f"{'height':>7s} {'U_lidar':>8s} {'U_point':>8s}")
     point = np.hypot(*np.moveaxis(np.asarray(series.point_velocity)[..., :2], -1, 0))
-    for k, h in enumerate(heights):
-        print(f"{h:7.1f} {np.nanmean(speed[:, k]):8.3f} {np.nanmean(point[:, k]):8.3f}")
+    print_height_means(heights, {"U_lidar": (series.speed, 8, 3), "U_point": (point, 8, 3)},
+                       what="scan cycle")
     print(f"wrote {res['los']}, {res['wind']}")
     return 0
 

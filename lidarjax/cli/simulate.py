@@ -13,9 +13,6 @@ sub-rays and probe cover (`lidarjax.cli._scanning.scan_region`); per beta it wri
 
 from __future__ import annotations
 
-import argparse
-import sys
-
 from .._util import format_number
 from ..io import read_settings, write_scan_netcdf
 from ..io.fields import check_field_file, load_field
@@ -24,14 +21,17 @@ from ..scanning import scan_points, simulate_scan
 from ..workflows.seed_results import explain_nans, seed_result_files, write_seed_results
 from ..workflows.seed_tables import settings_mount, simulate_settings, table_region
 from ._common import (
+    add_beta_arguments,
+    add_command,
     add_run_arguments,
+    add_settings_argument,
     add_tilt_arguments,
     check_output_folder,
     field_paths,
-    finite_float,
     make_probe,
     make_scan,
     selected_betas,
+    warning_line,
 )
 from ._scanning import (
     add_scan_pattern_arguments,
@@ -49,29 +49,28 @@ _SEED_U_REF = (-15.0, 0.0, 0.0)
 
 
 def register(sub) -> None:
-    sim = sub.add_parser(
-        "simulate", help="the seed workflow: settings.dat + CFD runs -> seed output files",
-        description="Simulate the lidar of a seed settings.dat in CFD runs (one per platform "
-                    "rotation beta) and write the seed's 'windcube simulation <beta> "
-                    "degrees.dat' files plus self-describing CSV tables.",
+    sim = add_command(
+        sub, "simulate", run,
+        "the seed workflow: settings.dat + CFD runs -> seed output files",
+        "Simulate the lidar of a seed settings.dat in CFD runs (one per platform "
+        "rotation beta) and write the seed's 'windcube simulation <beta> "
+        "degrees.dat' files plus self-describing CSV tables.",
         epilog="examples:\n"
-               "  lidarjax simulate settings.dat --field 'runs/platform_{beta}.npz' --all "
-               "--scan windcube_v1 --out results/\n"
-               "  lidarjax simulate settings.dat --field 'runs/platform_{beta}.npz' --all "
-               "--scan ppi --elevation 2 --n-rays 72 --gates 60 --probe pulsed --plot "
-               "--out ppi/\n"
-               "  lidarjax simulate settings.dat --field run.npz --scan VAD_194.hpl --out vad/\n\n"
-               "A scanning --scan (a preset or a .hpl / .nc scan file) writes per beta "
-               "scan_<beta>.nc (CF NetCDF, time x beam x range: LOS, ray times, azimuth, "
-               "elevation, flags) and, with --plot, scan_<beta>.png (a PPI on its cone seen "
-               "from above, an RHI on its vertical plane) instead of the seed files; --probe "
-               "pulsed is then the instrument's pulse per gate (--instrument, --gate-length).",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    sim.add_argument("settings", help="the seed's settings.dat")
-    which = sim.add_mutually_exclusive_group()
-    which.add_argument("--beta", type=finite_float, help="platform rotation to run (default: the "
-                                                 "settings file's beta)")
-    which.add_argument("--all", action="store_true", help="run every beta row, one batch")
+        "  lidarjax simulate settings.dat --field 'runs/platform_{beta}.npz' --all "
+        "--scan windcube_v1 --out results/\n"
+        "  lidarjax simulate settings.dat --field 'runs/platform_{beta}.npz' --all "
+        "--scan ppi --elevation 2 --n-rays 72 --gates 60 --probe pulsed --plot "
+        "--out ppi/\n"
+        "  lidarjax simulate settings.dat --field run.npz --scan VAD_194.hpl --out vad/\n\n"
+        "A scanning --scan (a preset or a .hpl / .nc scan file) writes per beta "
+        "scan_<beta>.nc (CF NetCDF, time x beam x range: LOS, ray times, azimuth, "
+        "elevation, flags) and, with --plot, scan_<beta>.png (a PPI on its cone seen "
+        "from above, an RHI on its vertical plane) instead of the seed files; --probe "
+        "pulsed is then the instrument's pulse per gate (--instrument, --gate-length).",
+        raw=True)
+    add_settings_argument(sim)
+    add_beta_arguments(sim, beta_help="platform rotation to run (default: the settings file's "
+                                      "beta)", all_help="run every beta row, one batch")
     add_run_arguments(sim, default_scan="windcube_v1", scan_type=scan_choice,
                       scan_help="a profiler (windcube_v1 default, windcube_v2, zephir), a "
                                 "scanning preset (ppi, rhi, stare, vad, rosette) or a Halo "
@@ -81,7 +80,6 @@ def register(sub) -> None:
     sim.add_argument("--plot", action="store_true",
                      help="scanning scans: a PNG per beta of the scan on its cone or plane")
     add_scan_pattern_arguments(sim, title="scanning scans (a preset or a scan file)")
-    sim.set_defaults(func=run)
 
 
 def run(args) -> int:
@@ -135,7 +133,7 @@ def run(args) -> int:
               "the same nodes, every beta's own)")
     why = explain_nans(sims, fields, settings, paths)
     if why:
-        print(f"lidarjax simulate: warning: {why}", file=sys.stderr)
+        warning_line("simulate", why)
     return 0
 
 
@@ -177,5 +175,5 @@ def run_scanning(args, settings, betas, paths) -> int:
         print(f"beta {b:g}: {describe(res, pattern.kind)}; wrote {', '.join(wrote)}")
         why = explain_scan_nans(res, field)
         if why:
-            print(f"lidarjax simulate: warning: beta {b:g}: {why}", file=sys.stderr)
+            warning_line("simulate", f"beta {b:g}: {why}")
     return 0

@@ -19,11 +19,14 @@ from ..response import PowerLawProfile, UniformProfile
 from ..workflows.records import check_instrument, load_records
 from ..workflows.seed_tables import build_table, table_region
 from ._common import (
+    add_command,
     add_run_arguments,
+    add_settings_argument,
     add_tilt_arguments,
     check_output_file,
     field_paths,
     height_list,
+    input_file,
     make_probe,
     make_scan,
 )
@@ -31,23 +34,24 @@ from ._dask import add_dask_arguments, dask_client, region_loader
 
 
 def register(sub) -> None:
-    tab = sub.add_parser(
-        "table", help="build a response table (for `correct`) from CFD runs over directions",
-        description="Simulate the lidar of a seed settings.dat in every CFD run (one per "
-                    "platform rotation beta, i.e. per inflow direction) and save the LOS "
-                    "per unit free-stream speed as a response table (.npz). The table records "
-                    "the instrument (scan, cone angle, beams), probe, mount, heights and CFD "
-                    "source, which `correct` checks against each record file's header.",
+    tab = add_command(
+        sub, "table", run,
+        "build a response table (for `correct`) from CFD runs over directions",
+        "Simulate the lidar of a seed settings.dat in every CFD run (one per "
+        "platform rotation beta, i.e. per inflow direction) and save the LOS "
+        "per unit free-stream speed as a response table (.npz). The table records "
+        "the instrument (scan, cone angle, beams), probe, mount, heights and CFD "
+        "source, which `correct` checks against each record file's header.",
         epilog="example: lidarjax table settings.dat --field 'runs/platform_{beta}.npz' "
-               "--scan windcube_v2 --heights-from wls7_2020_10_07.sta --out site_table.npz")
-    tab.add_argument("settings", help="the seed's settings.dat (all beta rows are used)")
+        "--scan windcube_v2 --heights-from wls7_2020_10_07.sta --out site_table.npz")
+    add_settings_argument(tab, "all beta rows are used")
     add_run_arguments(tab, default_scan="windcube_v2")
     add_tilt_arguments(tab)
     heights = tab.add_mutually_exclusive_group()
     heights.add_argument("--heights", type=height_list, default=None,
                          help="measurement heights in m above the lidar, e.g. 40,54,74 "
                               "(default: the settings file's)")
-    heights.add_argument("--heights-from", default=None, metavar="RECORDS",
+    heights.add_argument("--heights-from", default=None, metavar="RECORDS", type=input_file,
                          help="take the heights from a record file (.sta, .rtd or ZephIR .csv)")
     tab.add_argument("--tilt-from-records", action="store_true",
                      help="with --heights-from: take --pitch and --roll from the record "
@@ -68,7 +72,6 @@ def register(sub) -> None:
     tab.add_argument("--out", required=True, help="table file to write (.npz); an existing "
                      "file is replaced atomically, an input never")
     add_dask_arguments(tab)
-    tab.set_defaults(func=run)
 
 
 def parameter_values(text: str) -> tuple[str, list[float]]:
@@ -141,9 +144,7 @@ def _tilt_from(args, rec) -> None:
 
 
 def _record_heights(path):
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"--heights-from: record file not found: {p}")
+    p = Path(path)  # an existing file (checked when parsed)
     rec = load_records(p)
     if rec.heights.size == 0:
         raise ValueError(f"--heights-from {p}: the file lists no heights")

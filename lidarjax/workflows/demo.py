@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._util import nan_max, nan_mean
 from ..batch import simulate_rotations
 from ..field import GridField
 from ..frames import rotation_z
@@ -137,7 +138,8 @@ def run_demo_simulations() -> tuple[DemoResult, dict]:
 
 
 def format_table(result: DemoResult, rows=None) -> str:
-    """Text table: per z/H, mean C_U (max |C_U - 1|) and mean (max) |dtheta| over directions."""
+    """Text table: per z/H, mean C_U (max |C_U - 1|) and mean (max) |dtheta| over directions
+    (``nan`` where no direction gave a value: the point is outside the field or in a solid)."""
     cols = ["point", "windcube_v1", "windcube_v2", "zephir"]
     head = "  z/H " + "".join(f"{c:>15s}" for c in cols)
     rows = range(len(result.z_over_h)) if rows is None else rows
@@ -146,14 +148,14 @@ def format_table(result: DemoResult, rows=None) -> str:
         row = f"{result.z_over_h[k]:5.2f} "
         for c in cols:
             v = result.c_u[c][:, k]
-            row += f"{np.nanmean(v):6.3f} ({np.nanmax(np.abs(v - 1)):.3f})".rjust(15)
+            row += f"{nan_mean(v):6.3f} ({nan_max(np.abs(v - 1)):.3f})".rjust(15)
         lines.append(row)
     lines += ["", "direction error theta_free - theta (deg): mean |error| (max |error|)", head]
     for k in rows:
         row = f"{result.z_over_h[k]:5.2f} "
         for c in cols:
             v = np.abs(result.dtheta[c][:, k])
-            row += f"{np.nanmean(v):6.2f} ({np.nanmax(v):5.2f})".rjust(15)
+            row += f"{nan_mean(v):6.2f} ({nan_max(v):5.2f})".rjust(15)
         lines.append(row)
     return "\n".join(lines)
 

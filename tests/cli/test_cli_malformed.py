@@ -656,3 +656,158 @@ def test_old_table_without_metadata_warns_and_corrects(case, capsys, tmp_path):
     assert rc == 0 and "converged 18 of 18" in text
     warn = [ln for ln in err.splitlines() if "cannot be checked" in ln]
     assert len(warn) == 1 and "cone_angle_deg" in warn[0]
+
+
+# ------------------------------------------------------------------------------------------
+# missing inputs: named as missing when the arguments are parsed (issue 37)
+
+MISSING = "no_such_input"
+FIELD = "CFD field file or folder not found"
+#: every input path argument of every command, `M` where the missing path goes; the other
+#: inputs exist (`s.dat`, `f.csv`: placeholders, never read: parsing stops at the missing one)
+_MISSING_INPUTS = [
+    ("series", ["s.dat", "--sequence", "M"], "--sequence", "OpenFOAM case not found"),
+    ("series", ["M"], "settings", "file not found"),
+    ("series", ["s.dat", "--field", "M"], "--field", FIELD),
+    ("series", ["s.dat", "--field", "f.csv", "--box", "f.csv,M,f.csv"], "--box", "file not found"),
+    ("series", ["s.dat", "--motion", "M"], "--motion", "file not found"),
+    ("series", ["s.dat", "--scan", "M.hpl"], "--scan", "file not found"),
+    ("simulate", ["M", "--field", "f.csv"], "settings", "file not found"),
+    ("simulate", ["s.dat", "--field", "M"], "--field", FIELD),
+    ("simulate", ["s.dat", "--field", "f.csv", "--scan", "M.nc"], "--scan", "file not found"),
+    ("table", ["M", "--field", "f.csv", "--out", "t.npz"], "settings", "file not found"),
+    ("table", ["s.dat", "--field", "M", "--out", "t.npz"], "--field", FIELD),
+    ("table", ["s.dat", "--field", "f.csv", "--heights-from", "M", "--out", "t.npz"],
+     "--heights-from", "file not found"),
+    ("correct", ["--table", "M", "--records", "f.csv"], "--table", "file not found"),
+    ("correct", ["--table", "f.csv", "--records", "M"], "--records", "file not found"),
+    ("calibrate", ["--table", "M", "--records", "f.csv"], "--table", "file not found"),
+    ("calibrate", ["--table", "f.csv", "--records", "f.csv", "M"], "--records", "file not found"),
+    ("calibrate", ["--table", "f.csv", "--records", "f.csv", "--reference", "M"], "--reference",
+     "file not found"),
+    ("monitor-points", ["M", "--out", "o"], "settings", "file not found"),
+    ("monitor-points", ["s.dat", "--field", "M", "--out", "o"], "--field", FIELD),
+    ("monitor-points", ["s.dat", "--sampled", "M", "--out", "o"], "--sampled",
+     "file or folder not found"),
+    ("sensitivity", ["M", "--field", "f.csv"], "settings", "file not found"),
+    ("sensitivity", ["s.dat", "--field", "M"], "--field", FIELD),
+    ("design", ["M", "--field", "f.csv", "--region", "box:0,1,0,1,0,1"], "settings",
+     "file not found"),
+    ("design", ["s.dat", "--field", "M", "--region", "box:0,1,0,1,0,1"], "--field", FIELD),
+    ("farm", ["M", "--turbine", "f.csv", "--lidar", "0", "0", "0", "--out", "o"], "layouts",
+     "file not found"),
+    ("farm", ["f.csv", "--turbine", "M", "--lidar", "0", "0", "0", "--out", "o"], "--turbine",
+     "file not found"),
+    ("scan", ["M.hpl"], "scan", "file not found"),
+    ("scan", ["ppi", "--field", "M"], "--field", FIELD),
+]
+
+
+@pytest.mark.parametrize(("command", "argv", "option", "text"), _MISSING_INPUTS,
+                         ids=[f"{c}-{o}" for c, _, o, _ in _MISSING_INPUTS])
+def test_a_missing_input_is_named_as_missing_when_parsed(tmp_path, monkeypatch, capsys, command,
+                                                         argv, option, text):
+    monkeypatch.chdir(tmp_path)
+    Path("s.dat").write_text("not read\n")
+    Path("f.csv").write_text("not read\n")
+    missing = [a.replace("M", MISSING) if a in ("M", "M.hpl", "M.nc") or ",M," in a else a
+               for a in argv]
+    rc, _, err = run_cli([command, *missing], capsys)
+    assert_one_line_error(rc, err, f"lidarjax {command}: error: argument {option}: {text}",
+                          MISSING)
+
+
+def test_every_input_path_argument_is_checked_when_parsed():
+    """Each command's arguments that name an input file or folder carry a checking type (so
+    a new one cannot slip in unchecked), and the catalogue above tries each of them."""
+    from lidarjax.cli import _common, build_parser
+    from lidarjax.cli._scanning import scan_choice, scan_source
+    from lidarjax.cli.series import _mean_flow
+
+    checked = {_common.input_file, _common.input_folder, _common.input_path,
+               _common.input_case, _common.input_files, _common.field_input, scan_source,
+               scan_choice, _mean_flow}
+    inputs = {"settings", "field", "sequence", "box", "motion", "heights_from", "table",
+              "records", "reference", "sampled", "layouts", "turbine", "scan"}
+    parser = build_parser()
+    commands = next(a for a in parser._actions if a.dest == "command").choices
+    tried = {(c, o) for c, _, o, _ in _MISSING_INPUTS}
+    seen = set()
+    for name, sub in commands.items():
+        if id(sub) in seen:  # an alias (probes: monitor-points)
+            continue
+        seen.add(id(sub))
+        for action in sub._actions:
+            if action.dest not in inputs or action.choices:  # --scan of fixed names
+                continue
+            assert action.type in checked, (name, action.dest)
+            option = action.option_strings[0] if action.option_strings else action.dest
+            assert (name, option) in tried, (name, option)
+
+
+# ------------------------------------------------------------------------------------------
+# warnings: one line each, `lidarjax COMMAND: warning: ...` (issue 37)
+
+
+def test_a_library_warning_is_one_line_on_the_command_line(tmp_path, capsys):
+    """A turbine curve with Ct >= 1 is clipped with a `UserWarning` (lidarjax.scenes.farm):
+    on the command line it is one line without Python's source file and line, and the
+    library still warns as before once the command is over. (The unknown --yaw turbine then
+    stops the command before anything is simulated.)"""
+    import warnings
+
+    from lidarjax.io.layout import read_turbine_type
+
+    (tmp_path / "a.txt").write_text("T001 251865.0 646486.0\n")
+    (tmp_path / "t.csv").write_text("# rotor_diameter = 126\n# hub_height = 90\nspeed,ct\n"
+                                    "3.0,1.13\n11.4,0.72\n25.0,0.06\n")
+    argv = ["farm", tmp_path / "a.txt", "--turbine", tmp_path / "t.csv", "--lidar", "0", "0",
+            "0", "--yaw", "T999=5", "--out", tmp_path / "o"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")  # as a user's Python shows warnings
+        rc, _, err = run_cli(argv, capsys)
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 2, err
+    assert lines[0].startswith(f"lidarjax farm: warning: {tmp_path / 't.csv'}: Ct 0.06..1.13 "
+                               "leaves [0, 1); clipped"), lines[0]
+    assert "UserWarning" not in err and ".py:" not in err
+    assert lines[1].startswith("lidarjax farm: error: --yaw 'T999=5'")
+    with pytest.warns(UserWarning, match="clipped"):  # the library: a proper UserWarning
+        read_turbine_type(tmp_path / "t.csv")
+
+
+def test_a_scan_file_warning_names_the_command(tmp_path, capsys):
+    """Warnings the command line catches itself (a truncated Halo file's reader) take the
+    same form. (The field that is no field then stops the command before any simulation.)"""
+    from ..io.test_hpl import RHI
+
+    cut = tmp_path / "cut.hpl"
+    cut.write_text("\n".join(RHI.read_text().splitlines()[:-5]) + "\n")  # last ray cut
+    bad = tmp_path / "bad.npz"
+    bad.write_text("not an archive")
+    rc, _, err = run_cli(["scan", cut, "--field", bad, "--out", tmp_path / "s.nc"], capsys)
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 2, err
+    assert lines[0].startswith(f"lidarjax scan: warning: {cut}, line 96: truncated file"), err
+    assert lines[1].startswith("lidarjax scan: error:") and "bad.npz" in lines[1]
+
+
+def test_height_table_of_no_finite_value_prints_nan_with_a_reason(capsys):
+    """The per-height table of `lidarjax series`: a height where every record is NaN (or no
+    records at all) prints nan and says why, without numpy's 'Mean of empty slice'."""
+    import warnings
+
+    from lidarjax.cli._common import print_height_means
+
+    speed = np.array([[5.0, np.nan], [7.0, np.nan]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        print_height_means([40.0, 80.0], {"U_lidar": (speed, 8, 3)})
+        print_height_means([40.0], {"U_lidar": (np.zeros((0, 1)), 8, 3),
+                                    "avail%": (np.zeros((0, 1)), 7, 1)})
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].split() == ["height", "U_lidar"]
+    assert out[1].split() == ["40.0", "6.000"] and out[2].split() == ["80.0", "nan"]
+    assert out[3].startswith("nan: no finite record behind the mean (U_lidar;")
+    assert out[5].split() == ["40.0", "nan", "nan"]
+    assert out[6].startswith("nan: no finite record behind the mean (U_lidar, avail%;")

@@ -403,3 +403,31 @@ def test_every_argument_accepts_tracers_under_grad_jit_vmap(arg, form):
         np.testing.assert_allclose(a, b, rtol=1e-15, atol=0)
     xs = jnp.array([0.3, -2.0, 5.0])
     np.testing.assert_allclose(jax.vmap(f)(xs), [f(float(x)) for x in xs], rtol=1e-13)
+
+
+def test_ten_thousand_mounts_from_lists_cost_about_one_read_of_the_numbers():
+    """Issue 37: since tracers may hide in a tuple (above), every check of `Mount` walked all
+    40,000 numbers of 10,000 rotations given as lists (54 times the cost of reading them into
+    numpy, 140 ms); they are read once now. Timing on a shared CI machine is noisy, so the
+    bound is loose and relative (best of three, against numpy's own read of the lists; about
+    2 times with the fix); benchmarks/mount.py has the figures against commit 1d75568."""
+    import time
+
+    n = 10_000
+    locs = (np.tile([12.0, -7.0, 31.0], (n, 1)) + np.linspace(0.0, 1.0, n)[:, None]).tolist()
+    betas = np.linspace(0.0, 360.0, n, endpoint=False).tolist()
+
+    def best(fn):
+        times = []
+        for _ in range(3):
+            t = time.perf_counter()
+            jax.block_until_ready(fn())
+            times.append(time.perf_counter() - t)
+        return min(times)
+
+    m = lj.Mount(locs, beta=betas, psi=180.0)
+    np.testing.assert_array_equal(m.location, np.asarray(locs))
+    np.testing.assert_array_equal(m.beta, np.asarray(betas))
+    t_mount = best(lambda: lj.Mount(locs, beta=betas, psi=180.0))
+    t_read = best(lambda: (np.asarray(locs), np.asarray(betas)))
+    assert t_mount < 12.0 * t_read + 0.01, (t_mount, t_read)
