@@ -26,6 +26,7 @@ constants (``lidarjax.sensitivity.OUTPUTS``) are reached through them.
 import importlib.metadata
 
 from . import _deprecated
+from . import control as control
 from . import io as io
 from . import plots as plots
 from . import scenes as scenes
