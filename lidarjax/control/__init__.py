@@ -7,6 +7,8 @@ spectra and coherence, and the feed-forward filter they design (Task 52's model)
   (the rotor frame: ``x`` upstream along the rotor axis, metres).
 - `spectra`: `lac_spectra` -> `LacSpectra` (``S_RR``, ``S_LL``, ``S_RL``, coherence,
   ``|G_RL|``), `coherence_bandwidth`, `filter_cutoff`, `filter_delay`, `buffer_time`.
+- `rews`: `rotor_rews` (the REWS of any field), `lidar_rews` (the lidar's estimate, Task 52's
+  processing), `rotor_to_cfd`.
 
 See ``docs/lidar-assisted-control.md``.
 """
@@ -19,6 +21,9 @@ from .geometry import rotor_disc as rotor_disc
 from .inflow import IEC_REFERENCE_INTENSITY as IEC_REFERENCE_INTENSITY
 from .inflow import KaimalInflow as KaimalInflow
 from .inflow import iec_turbulence_intensity as iec_turbulence_intensity
+from .rews import lidar_rews as lidar_rews
+from .rews import rotor_rews as rotor_rews
+from .rews import rotor_to_cfd as rotor_to_cfd
 from .spectra import HALF_POWER as HALF_POWER
 from .spectra import LacSpectra as LacSpectra
 from .spectra import buffer_time as buffer_time
@@ -30,5 +35,6 @@ from .spectra import lac_spectra as lac_spectra
 __all__ = [
     "HALF_POWER", "IEC_REFERENCE_INTENSITY", "KaimalInflow", "LacSpectra", "LidarSamples", "RotorDisc",
     "buffer_time", "coherence_bandwidth", "cone_points", "filter_cutoff", "filter_delay",
-    "iec_turbulence_intensity", "lac_spectra", "lidar_samples", "rotor_disc",
+    "iec_turbulence_intensity", "lac_spectra", "lidar_rews", "lidar_samples", "rotor_disc", "rotor_rews",
+    "rotor_to_cfd",
 ]
