@@ -63,7 +63,7 @@ def rotor_rews(field, rotor: RotorDisc, *, hub: Float[ArrayLike, " 3"], yaw: Flo
     pts = jnp.asarray(hub, dtype) + yz[:, :1] * rot[:, 1] + yz[:, 1:] * rot[:, 2]
     t = jnp.asarray(times, dtype)
     v = field.sample_local_at(_local(field, pts)[None], t[:, None])
-    u = -jnp.sum(v * rot[:, 0], axis=-1)
+    u = jnp.broadcast_to(-jnp.sum(v * rot[:, 0], axis=-1), t.shape + pts.shape[:1])  # steady: (1, n)
     return u @ rotor.weights.astype(dtype)
 
 
@@ -86,6 +86,6 @@ def lidar_rews(field, samples: LidarSamples, *, hub: Float[ArrayLike, " 3"], yaw
     pts = jnp.asarray(hub, dtype) + samples.points.astype(dtype) @ rot.T
     dirs = samples.directions.astype(dtype) @ rot.T
     t = jnp.asarray(times, dtype)[:, None] - samples.delays.astype(dtype)[None]
-    los = field.los_local_at(_local(field, pts)[None], dirs[None], t)
+    los = jnp.broadcast_to(field.los_local_at(_local(field, pts)[None], dirs[None], t), t.shape)
     u_est = -los / samples.directions[:, 0].astype(dtype)
     return u_est @ samples.weights.astype(dtype)

@@ -40,7 +40,9 @@ def test_shear_disc_mean(setup):
     field = lj.scenes.power_law(10.0, 150.0, 0.2, 270.0)
     z = HUB[2] + np.asarray(rotor.points[:, 1])
     expected = np.mean(10.0 * (z / 150.0) ** 0.2)
-    got = float(lc.rotor_rews(field, rotor, hub=HUB, yaw=270.0, times=jnp.zeros(1))[0])
+    got = lc.rotor_rews(field, rotor, hub=HUB, yaw=270.0, times=jnp.zeros(3))
+    assert got.shape == (3,)  # one value per time, also for a steady field
+    got = float(got[0])
     assert got == pytest.approx(expected, rel=1e-12)
     assert got < 10.0  # the concave profile's mean lies below its hub value
 
