@@ -39,6 +39,9 @@ class RotorDisc(eqx.Module):
       summed product of the two points' weights at that distance (the double sum of ``S_RR``
       folded once on the host; the disc is fixed, not a design variable).
     - `radius`: the rotor radius (m).
+    - `symmetric`: the points and weights are unchanged by ``y -> -y``, ``z -> -z`` and
+      ``y <-> z`` (`rotor_disc`'s grids): the spectra then evaluate the disc's coherence once per
+      class of lidar nodes those symmetries map onto each other (static).
     """
 
     points: Float[Array, "n 2"]
@@ -46,6 +49,7 @@ class RotorDisc(eqx.Module):
     pair_distance: Float[Array, " m"]
     pair_weight: Float[Array, " m"]
     radius: Float[Array, ""]
+    symmetric: bool = eqx.field(static=True, default=False)
 
 
 def rotor_disc(radius: float, *, spacing: float = 8.0,
@@ -87,7 +91,7 @@ def rotor_disc(radius: float, *, spacing: float = 8.0,
                      weights=jnp.asarray(w, dtype),
                      pair_distance=jnp.asarray(np.sqrt(keep) * spacing, dtype),
                      pair_weight=jnp.asarray(folded[keep], dtype),
-                     radius=jnp.asarray(radius, dtype))
+                     radius=jnp.asarray(radius, dtype), symmetric=True)
 
 
 class LidarSamples(eqx.Module):

@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from .._precision import safe_sqrt
+from .._precision import is_concrete, safe_sqrt
 from .._util import compiled
 from .geometry import LidarSamples, RotorDisc
 from .inflow import KaimalInflow
@@ -76,7 +76,7 @@ def _lateral_distance(a, b):
     return safe_sqrt(jnp.sum(d**2, axis=-1))
 
 
-def _one_frequency(f, spec, rate, rotor, samples, lead, r_ll, r_rl, vw):
+def _one_frequency(f, spec, rate, rotor, samples, lead, r_ll, r_rl, inverse, vw):
     om = 2 * np.pi * f
     rr = jnp.dot(rotor.pair_weight, jnp.exp(-rate * rotor.pair_distance))
     # cos(om (t_j - t_l)) = cos cos + sin sin: n cosines per frequency, not n^2
@@ -84,27 +84,30 @@ def _one_frequency(f, spec, rate, rotor, samples, lead, r_ll, r_rl, vw):
     ws = samples.weights * jnp.sin(om * lead)
     e = jnp.exp(-rate * r_ll)
     ll = wc @ e @ wc + ws @ e @ ws
-    a = rotor.weights @ jnp.exp(-rate * r_rl)  # (n,): the disc's coherence with each node
+    a = rotor.weights @ jnp.exp(-rate * r_rl)  # the disc's coherence with each node (or class)
+    if inverse is not None:
+        a = a[inverse]
     rl = jnp.dot(a, wc) - 1j * jnp.dot(a, ws)
     s_ll = spec[0] * ll + spec[1] * vw[0] + spec[2] * vw[1]
     return spec[0] * rr, s_ll, spec[0] * rl
 
 
 @jax.jit
-def _spectra(samples, rotor, inflow, frequency):
+def _spectra(samples, rotor, inflow, frequency, classes=None):
     f = jnp.asarray(frequency)
     spec = inflow.spectra(f).T
     rate = inflow.decay_rate(f)
     lead = samples.points[:, 0] / inflow.mean_speed - samples.delays
     yz = samples.points[:, 1:]
     r_ll = _lateral_distance(yz, yz)
-    r_rl = _lateral_distance(rotor.points.astype(yz.dtype), yz)
+    rep, inverse = (None, None) if classes is None else classes
+    r_rl = _lateral_distance(rotor.points.astype(yz.dtype), yz if rep is None else yz[rep])
     nd = samples.directions
     w2 = samples.weights**2
     vw = jnp.stack([jnp.sum(w2 * (nd[:, 1] / nd[:, 0]) ** 2), jnp.sum(w2 * (nd[:, 2] / nd[:, 0]) ** 2)])
 
     def one(args):
-        return _one_frequency(*args, rotor, samples, lead, r_ll, r_rl, vw)
+        return _one_frequency(*args, rotor, samples, lead, r_ll, r_rl, inverse, vw)
 
     s_rr, s_ll, s_rl = jax.lax.map(one, (f, spec, rate))
     return LacSpectra(frequency=f, S_RR=s_rr, S_LL=s_ll, S_RL=s_rl, mean_speed=inflow.mean_speed)
@@ -129,7 +132,21 @@ def lac_spectra(samples: LidarSamples, rotor: RotorDisc, inflow: KaimalInflow,
                          f"got shape {f.shape}")
     if isinstance(f, np.ndarray) and not np.all(f > 0):
         raise ValueError("lac_spectra: frequency must be positive (Hz)")
-    return _spectra(samples, rotor, inflow, jnp.asarray(f))
+    return _spectra(samples, rotor, inflow, jnp.asarray(f), _symmetry_classes(samples, rotor))
+
+
+def _symmetry_classes(samples, rotor):
+    """For a symmetric disc and concrete nodes: one representative node per class of nodes
+    that the disc's symmetries map onto each other (same ``sort(|y|, |z|)`` to 1e-9 m), and
+    each node's class; ``None`` when traced (gradients keep every node's own distances) or when
+    nothing repeats."""
+    if not rotor.symmetric or not is_concrete(samples.points):
+        return None
+    canon = np.sort(np.abs(np.asarray(samples.points[:, 1:], np.float64)), axis=1)
+    _, rep, inverse = np.unique(np.round(canon, 9), axis=0, return_index=True, return_inverse=True)
+    if rep.size == canon.shape[0]:
+        return None
+    return jnp.asarray(rep), jnp.asarray(inverse.ravel())
 
 
 def _first_crossing(x, y, level):
