@@ -168,7 +168,7 @@ def test_the_layering_rule_is_not_vacuous():
 
 
 # -- the public API ---------------------------------------------------------------------------
-NAMESPACES = {"lidarjax", "lidarjax.scenes", "lidarjax.io", "lidarjax.plots"}
+NAMESPACES = {"lidarjax", "lidarjax.scenes", "lidarjax.io", "lidarjax.plots", "lidarjax.control"}
 
 
 def _docs_code():
