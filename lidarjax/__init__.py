@@ -26,6 +26,7 @@ constants (``lidarjax.sensitivity.OUTPUTS``) are reached through them.
 import importlib.metadata
 
 from . import _deprecated
+from . import control as control
 from . import io as io
 from . import plots as plots
 from . import scenes as scenes
@@ -48,12 +49,14 @@ from .calibrate import Calibration as Calibration
 from .calibrate import calibrate as calibrate
 from .corrections import correction_factors as correction_factors
 from .design import DualDopplerDesign as DualDopplerDesign
+from .design import LacDesign as LacDesign
 from .design import Placement as Placement
 from .design import RegionBox as RegionBox
 from .design import RegionPolygon as RegionPolygon
 from .design import RegionRing as RegionRing
 from .design import VadDesign as VadDesign
 from .design import design_dual_doppler as design_dual_doppler
+from .design import design_lac_scan as design_lac_scan
 from .design import design_placement as design_placement
 from .design import design_vad as design_vad
 from .design import dual_doppler_variance as dual_doppler_variance

@@ -5,7 +5,8 @@ and docs use.
 Layers, lowest first (each may import only itself and the ones before it):
 
 0. shared helpers: ``lidarjax._util``, ``lidarjax._precision``, ``lidarjax._deprecated``;
-1. the core (every other module at the package root except ``plots``, and ``lidarjax.scanning``);
+1. the core (every other module at the package root except ``plots``, ``lidarjax.scanning`` and
+   ``lidarjax.control``);
 1.5. ``lidarjax.design`` (optimisation through the core: it imports the core, the core never
    imports it);
 2. ``lidarjax.scenes``;
@@ -44,7 +45,7 @@ def layer(module: str) -> float:
         return 1.5
     if len(parts) == 2 and parts[1] not in ("scenes", "io", "plots", "workflows", "cli"):
         return 1
-    if parts[1] == "scanning":  # a core subpackage (scanning lidars)
+    if parts[1] in ("scanning", "control"):  # core subpackages (scanning lidars, lidar-assisted control)
         return 1
     return {"scenes": 2, "io": 3, "plots": 4, "workflows": 5, "cli": 6}[parts[1]]
 
@@ -167,7 +168,7 @@ def test_the_layering_rule_is_not_vacuous():
 
 
 # -- the public API ---------------------------------------------------------------------------
-NAMESPACES = {"lidarjax", "lidarjax.scenes", "lidarjax.io", "lidarjax.plots"}
+NAMESPACES = {"lidarjax", "lidarjax.scenes", "lidarjax.io", "lidarjax.plots", "lidarjax.control"}
 
 
 def _docs_code():

@@ -14,7 +14,7 @@ import sys
 
 from .. import __version__
 from . import calibrate as calibrate_cmd
-from . import correct, demo, design, farm, monitor_points, scan, series, simulate, table
+from . import correct, demo, design, farm, lac, monitor_points, scan, series, simulate, table
 from . import sensitivity as sensitivity_cmd
 from ._common import (
     OneLineParser,
@@ -27,7 +27,7 @@ from ._common import (
 
 #: The command modules, in the order `--help` lists them.
 COMMANDS = (demo, simulate, table, correct, calibrate_cmd, monitor_points, sensitivity_cmd, series,
-            farm, scan, design)
+            farm, scan, design, lac)
 
 
 def build_parser() -> argparse.ArgumentParser:

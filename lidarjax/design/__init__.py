@@ -7,10 +7,17 @@ through the differentiable forward model.
 - `scanning`: `design_dual_doppler` (two scanning lidars' positions for the smallest
   dual-Doppler retrieval variance) and `design_vad` (elevation and ray count of a PPI/VAD for
   the smallest VAD-fit variance).
+- `control`: `design_lac_scan` (focus distance, half-cone angle, beam count and range gate of
+  a nacelle lidar for the widest lidar–rotor coherence bandwidth, lidar-assisted control).
 
 See ``docs/design.md``.
 """
 
+from .control import TURBINES as TURBINES
+from .control import LacDesign as LacDesign
+from .control import Turbine as Turbine
+from .control import design_lac_scan as design_lac_scan
+from .control import lac_objective as lac_objective
 from .placement import OBJECTIVES as OBJECTIVES
 from .placement import Placement as Placement
 from .placement import RegionBox as RegionBox

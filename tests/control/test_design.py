@@ -1,0 +1,35 @@
+"""Scan design by gradients for lidar-assisted control against a dense grid search: as good
+within 1 % with at least 10x fewer objective evaluations."""
+
+import numpy as np
+import pytest
+
+from lidarjax import control as lc
+from lidarjax.design import control as dc
+
+INFLOW = lc.KaimalInflow(11.4, lc.iec_turbulence_intensity(11.4, "A"))
+KW = dict(n_points=4, distance=100.0, half_cone=(5.0, 40.0), gate_length=30.0, spacing=5.0,
+          frequency=np.linspace(0.005, 0.4, 40))
+
+
+def test_design_beats_grid_search():
+    dense = np.linspace(5.0, 40.0, 300)[:, None]
+    values, _ = dc.lac_objective("NREL5MW", INFLOW, dense, **KW)
+    best = np.nanmin(values)
+    kw = dict(KW, n_points=(4,))
+    d = dc.design_lac_scan("NREL5MW", INFLOW, n_coarse=4, n_starts=1, max_steps=10, **kw)
+    assert d.names == ("half_cone",)
+    assert d.value <= best + 0.01 * abs(best)
+    assert 10 * d.n_evaluations <= dense.shape[0]
+    assert d.bandwidth == pytest.approx(-d.value)
+    assert 5.0 < d.x[0] < 40.0  # an interior optimum: too narrow misses the disc, too wide sees v and w
+    assert d.scan_radius == pytest.approx(100.0 * np.tan(np.deg2rad(d.x[0])))
+
+
+def test_design_refuses_bad_input():
+    with pytest.raises(ValueError, match="turbine"):
+        dc.design_lac_scan("V236", INFLOW)
+    with pytest.raises(ValueError, match="nothing to optimise"):
+        dc.design_lac_scan("NREL5MW", INFLOW, distance=100.0, half_cone=20.0, gate_length=30.0)
+    with pytest.raises(ValueError, match="objective"):
+        dc.design_lac_scan("NREL5MW", INFLOW, objective="power")
