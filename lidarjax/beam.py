@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 
 import equinox as eqx
 import jax
@@ -473,6 +474,34 @@ class ExactPoints:
                                    mount=self.mount, caller="exact points")
         self.probe = used
         return simulate_points(self.scan, self.mount, self.heights, used)
+
+
+def graded_warning(caller: str, field, mount: Mount, heights, what: str, why: str,
+                   fix: str) -> None:
+    """One-line `UserWarning` of `caller`: `why`, the run samples the graded grid resampled
+    from the mesh `what` (its local spacing directly above the lidar at the lowest and the
+    highest height, m) instead of the mesh's own cellPoint values; `fix`."""
+    warnings.warn(f"{caller}: {why}, so it samples the graded grid of {what}"
+                  f"{_spacing_text(field, mount, heights)}, not the mesh's own cellPoint values "
+                  f"(next to a graded ground typically 0.1 m/s off OpenFOAM's probes); {fix}",
+                  UserWarning, stacklevel=3)
+
+
+def _spacing_text(field, mount: Mount, heights) -> str:
+    """`` (local spacing 1.25 m at 10 m above the lidar, 5 m at 60 m)`` for the warning."""
+    try:
+        loc = (np.asarray(mount.location, np.float64).reshape(-1, 3)[0]
+               + np.asarray(mount.location_lo, np.float64).reshape(-1, 3)[0])
+        h = np.sort(np.atleast_1d(np.asarray(heights, np.float64)).reshape(-1))
+        s = field.spacing_at(loc + h[:, None] * np.array([0.0, 0.0, 1.0]))
+        s = np.full(h.shape, field.resolution, np.float64) if s is None else np.asarray(s)
+    except (TypeError, ValueError, AttributeError, jax.errors.ConcretizationTypeError):
+        return ""
+    if not np.isfinite(s).any():
+        return ""
+    ends = [(s[k], h[k]) for k in sorted({0, h.size - 1}) if np.isfinite(s[k])]
+    return " (local spacing " + ", ".join(
+        f"{a:.3g} m at {b:g} m" for a, b in ends) + " above the lidar)"
 
 
 def simulate_points(
