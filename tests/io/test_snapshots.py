@@ -110,7 +110,7 @@ def test_pimplefoam_run_matches_its_own_probes_at_the_lidars_times(transient):
     every height, 10 m included, and within 0.05 m/s of the probes at every step (adding the
     2-s snapshots' interpolation in time)."""
     seq, s, probes, mp, heights = transient
-    assert len(seq) == 11 and seq.time_span == (10.0, 30.0) and seq.can_be_exact
+    assert len(seq) == 11 and seq.time_span == (10.0, 30.0)
     los, t_los = np.asarray(s.los), np.asarray(s.los_time)
     assert np.isfinite(los).all() and not np.asarray(s.los_flags).any()
     lidar = np.array([150.0, 60.0, 0.0])
@@ -127,6 +127,7 @@ def test_pimplefoam_run_matches_its_own_probes_at_the_lidars_times(transient):
             err_snap[i] = max(err_snap[i], np.max(np.abs(
                 los[:, i, b] - np.interp(t_los[:, i, b], snap, series_j[rows]))))
     assert err_snap.max() < 1e-5 and np.max(err_step) < 0.05, (err_snap, np.max(err_step))
+    assert seq.can_be_exact  # loaded without exact_at: simulate_series prepared the points
     # the flow really changes over the run: the inflow ramps 6 -> 10 m/s
     assert np.ptp(np.asarray(s.point_velocity)[:, -1, 0]) > 0.5
 
@@ -516,3 +517,32 @@ def test_nonfinite_exact_points_are_refused_before_the_mesh_is_read(monkeypatch)
     assert "\n" not in str(err.value)
     with pytest.raises(ValueError, match="`exact_at` must give finite"):
         load_field_sequence(DATA, exact_at=np.zeros((0, 3)))
+
+
+def test_a_mesh_loaded_without_points_is_exact_where_simulate_samples():
+    """`load_field` of one snapshot without `exact_at`: `simulate` from one mount samples the
+    mesh's own cellPoint (OpenFOAM's probes at 10 s within 1e-5 m/s at every height, 5 m
+    next to the graded ground included); a batch of mounts cannot be prepared: one warning
+    line (once per field) and the grid; ``exact_at=False`` is the grid, silently."""
+    scan, mount = lj.windcube_v2(), lj.Mount(GRADED_LIDAR)
+    region = lj.scan_bounds(scan, mount, GRADED_HEIGHTS)
+    f = lj.io.load_field(GRADED, time="10", region=region)
+    probes = read_openfoam_probes(GRADED / "postProcessing" / "lidarProbes")
+    mp = lj.monitor_points(scan, mount, GRADED_HEIGHTS)
+    los = np.asarray(lj.simulate(f, scan, mount, GRADED_HEIGHTS).los)
+    err = [max(abs(los[i, b] - probe_los(probes, mp, h, b, 10.0, lidar=GRADED_LIDAR,
+                                          snapshots=np.array([10.0, 12.5])))
+               for b in range(5)) for i, h in enumerate(GRADED_HEIGHTS)]
+    assert max(err) < 1e-5, err
+    two = lj.Mount(np.stack([GRADED_LIDAR, GRADED_LIDAR]))
+    with pytest.warns(UserWarning) as caught:  # a traced mount: the grid
+        batch = np.asarray(jax.vmap(lambda m: lj.simulate(f, scan, m, GRADED_HEIGHTS).los)(two))
+    assert len(caught) == 1 and "\n" not in str(caught[0].message)
+    assert re.search(r"finest spacing 0\.9\d* m", str(caught[0].message)), caught[0].message
+    assert "exact_at=False" in str(caught[0].message)
+    assert np.abs(batch[0] - los).max() > 0.05  # the graded grid next to the ground
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per field
+        jax.vmap(lambda m: lj.simulate(f, scan, m, GRADED_HEIGHTS[:2]).los)(two)
+    grid = lj.io.load_field(GRADED, time="10", region=region, exact_at=False)
+    assert lj.beam.exact_by_default(grid, scan, mount, GRADED_HEIGHTS, None, "simulate") is grid
