@@ -501,22 +501,24 @@ def register_mesh_grid(grid: AbstractField, prepare, name: str) -> None:
                         _MeshSource(prepare, name))
 
 
-def exact_by_default(field, scan, mount: Mount, heights, probe, caller: str):
+def exact_by_default(field, scan, mount: Mount, heights, probe, caller: str, *,
+                     moving: bool = False):
     """`field` as `simulate` samples it: a grid `lidarjax.io.load_field` resampled from a
     mesh without ``exact_at`` is made exact at the points `scan` samples from `mount`
     (`ExactPoints`, for a scanning pattern `scan_points`: the nodes `simulate` chooses)
     where they are known on the host (one concrete mount); elsewhere the grid, with a
     one-line warning (once per field) naming its local spacing and the fix. Any other field
-    is returned as it is."""
+    is returned as it is. `moving`: the lidar moves (a platform motion): not prepared."""
     entry = _MESH_GRIDS.get(id(field))
     if entry is None or entry[0]() is not field:
         return field
     src = entry[1]
-    if not (isinstance(mount, Mount) and not mount.batch_shape and is_concrete(mount, heights)
-            and is_concrete(field)):
+    if moving or not (isinstance(mount, Mount) and not mount.batch_shape
+                      and is_concrete(mount, heights) and is_concrete(field)):
         if not src.warned:
             src.warned = True
             graded_warning(caller, field, mount, heights, src.name,
+                           "a moving lidar's points are not known in advance" if moving else
                            "the points of a batch or traced mount are not known on the host",
                            "prepare them with load_field(..., exact_at=lidarjax.ExactPoints("
                            "scan, mount, heights, probe)) per mount, or exact_at=False to "

@@ -48,6 +48,7 @@ from .angles import horizontal_speed, wind_direction
 from .beam import (
     ExactPoints,
     beam_los,
+    exact_by_default,
     graded_warning,
     probe_for_field,
     profile_geometry,
@@ -248,10 +249,11 @@ def simulate_series(
     (`lidarjax.io.load_field_sequence`) is made exact, the mesh's own cellPoint (what
     OpenFOAM's `probes` report), at every point a fixed lidar samples, on the first window
     (`FieldSequence.made_exact` at `lidarjax.ExactPoints`, as ``lidarjax series
-    --sequence``); a scanning pattern from a fixed mount likewise at `lidarjax.scan_points`.
-    A moving lidar (or a traced mount) samples the graded grid instead, with a one-line
-    `UserWarning` naming the grid's local spacing above the lidar and the fix
-    (``exact_at=False`` at loading accepts the grid silently).
+    --sequence``); a scanning pattern from a fixed mount likewise at `lidarjax.scan_points`,
+    and one snapshot's grid `lidarjax.io.load_field` resampled from a mesh without
+    ``exact_at`` (also in `simulate_statistics`). A moving lidar (or a traced mount) samples
+    the graded grid instead, with a one-line `UserWarning` naming the grid's local spacing
+    above the lidar and the fix (``exact_at=False`` at loading accepts the grid silently).
 
     **Returns:** a `Series`. Raises `ValueError` before compiling for bad inputs.
     """
@@ -277,6 +279,9 @@ def simulate_series(
                            "for a fixed lidar the run is exact by default; give a finer "
                            "`spacing` to load_field_sequence (or exact_at=False to accept "
                            "the grid)")
+    else:  # a mesh's grid (`lidarjax.io.load_field`): exact at a fixed lidar's points
+        field = exact_by_default(field, scan, mount, heights, probe, "simulate_series",
+                                 moving=motion is not None)
     _validate(field, scan, mount, np.asarray(heights), None, probe)
     if not isinstance(schedule, Schedule):
         raise ValueError(f"simulate_series: `schedule` must be a lidarjax.Schedule, got "
@@ -833,6 +838,9 @@ def simulate_statistics(
     if not isinstance(schedule, Schedule):
         raise ValueError("simulate_statistics: `schedule` must be a lidarjax.Schedule.")
     schedule.check(scan)
+    if not ensemble:  # a mesh's grid (`lidarjax.io.load_field`): exact at a fixed lidar's points
+        field = exact_by_default(field, scan, mount, heights, probe, "simulate_statistics",
+                                 moving=motion is not None)
     probe_field = jax.tree_util.tree_map(lambda a: a[0], field) if ensemble else field
     _validate(probe_field, scan, mount, np.asarray(heights), None, probe)
     if refine_probe:

@@ -522,8 +522,9 @@ def test_nonfinite_exact_points_are_refused_before_the_mesh_is_read(monkeypatch)
 def test_a_mesh_loaded_without_points_is_exact_where_simulate_samples():
     """`load_field` of one snapshot without `exact_at`: `simulate` from one mount samples the
     mesh's own cellPoint (OpenFOAM's probes at 10 s within 1e-5 m/s at every height, 5 m
-    next to the graded ground included); a batch of mounts cannot be prepared: one warning
-    line (once per field) and the grid; ``exact_at=False`` is the grid, silently."""
+    next to the graded ground included); a moving lidar or a traced (vmapped) mount cannot
+    be prepared: one warning line (once per field) and the grid; ``exact_at=False`` is the
+    grid, silently."""
     scan, mount = lj.windcube_v2(), lj.Mount(GRADED_LIDAR)
     region = lj.scan_bounds(scan, mount, GRADED_HEIGHTS)
     f = lj.io.load_field(GRADED, time="10", region=region)
@@ -534,15 +535,18 @@ def test_a_mesh_loaded_without_points_is_exact_where_simulate_samples():
                                           snapshots=np.array([10.0, 12.5])))
                for b in range(5)) for i, h in enumerate(GRADED_HEIGHTS)]
     assert max(err) < 1e-5, err
-    two = lj.Mount(np.stack([GRADED_LIDAR, GRADED_LIDAR]))
-    with pytest.warns(UserWarning) as caught:  # a traced mount: the grid
-        batch = np.asarray(jax.vmap(lambda m: lj.simulate(f, scan, m, GRADED_HEIGHTS).los)(two))
-    assert len(caught) == 1 and "\n" not in str(caught[0].message)
-    assert re.search(r"finest spacing 0\.9\d* m", str(caught[0].message)), caught[0].message
-    assert "exact_at=False" in str(caught[0].message)
-    assert np.abs(batch[0] - los).max() > 0.05  # the graded grid next to the ground
+    motion = lj.SinusoidalMotion.of(roll=(2.0, 10.0))
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # once per field
-        jax.vmap(lambda m: lj.simulate(f, scan, m, GRADED_HEIGHTS[:2]).los)(two)
+        warnings.simplefilter("error")  # the warning as an error: nothing compiles
+        with pytest.raises(UserWarning) as caught:
+            lj.simulate_series(f, scan, mount, GRADED_HEIGHTS, (0.0, 5.0), motion=motion)
+    msg = str(caught.value)
+    assert "\n" not in msg and msg.startswith("simulate_series: a moving lidar"), msg
+    assert re.search(r"local spacing 0\.9\d* m at 5 m", msg) and "exact_at=False" in msg, msg
+    two = lj.Mount(np.stack([GRADED_LIDAR, GRADED_LIDAR]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a traced mount: the grid, the warning said once
+        batch = np.asarray(jax.vmap(lambda m: lj.simulate(f, scan, m, GRADED_HEIGHTS).los)(two))
+    assert np.abs(batch[0] - los).max() > 0.05  # the graded grid next to the ground
     grid = lj.io.load_field(GRADED, time="10", region=region, exact_at=False)
     assert lj.beam.exact_by_default(grid, scan, mount, GRADED_HEIGHTS, None, "simulate") is grid
