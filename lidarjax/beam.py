@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
+import weakref
 
 import equinox as eqx
 import jax
@@ -473,6 +475,92 @@ class ExactPoints:
                                    mount=self.mount, caller="exact points")
         self.probe = used
         return simulate_points(self.scan, self.mount, self.heights, used)
+
+
+class _MeshSource:
+    """What `lidarjax.io.load_field` keeps of a mesh it resampled without ``exact_at``: its
+    name and ``prepare(points) -> field`` (the grid made exact, the mesh's own cellPoint, at
+    `points` or a function of the grid returning them); the last field prepared is reused
+    for the same points."""
+
+    def __init__(self, prepare, name: str):
+        self.prepare, self.name, self.warned = prepare, name, False
+        self.last: tuple[np.ndarray, AbstractField] | None = None
+
+
+_MESH_GRIDS: dict[int, tuple[weakref.ref, _MeshSource]] = {}
+
+
+def register_mesh_grid(grid: AbstractField, prepare, name: str) -> None:
+    """Remember that `grid` was resampled from the mesh `name` (held as long as `grid` is):
+    `lidarjax.simulate` then samples ``prepare(points)``, the grid exact (the mesh's own
+    cellPoint) at the points it samples, wherever they are known on the host (a fixed
+    mount), and warns once in one line where they are not (`exact_by_default`)."""
+    key = id(grid)
+    _MESH_GRIDS[key] = (weakref.ref(grid, lambda _, k=key: _MESH_GRIDS.pop(k, None)),
+                        _MeshSource(prepare, name))
+
+
+def exact_by_default(field, scan, mount: Mount, heights, probe, caller: str, *,
+                     moving: bool = False):
+    """`field` as `simulate` samples it: a grid `lidarjax.io.load_field` resampled from a
+    mesh without ``exact_at`` is made exact at the points `scan` samples from `mount`
+    (`ExactPoints`, for a scanning pattern `scan_points`: the nodes `simulate` chooses)
+    where they are known on the host (one concrete mount); elsewhere the grid, with a
+    one-line warning (once per field) naming its local spacing and the fix. Any other field
+    is returned as it is. `moving`: the lidar moves (a platform motion): not prepared."""
+    entry = _MESH_GRIDS.get(id(field))
+    if entry is None or entry[0]() is not field:
+        return field
+    src = entry[1]
+    if moving or not (isinstance(mount, Mount) and not mount.batch_shape
+                      and is_concrete(mount, heights) and is_concrete(field)):
+        if not src.warned:
+            src.warned = True
+            graded_warning(caller, field, mount, heights, src.name,
+                           "a moving lidar's points are not known in advance" if moving else
+                           "the points of a batch or traced mount are not known on the host",
+                           "prepare them with load_field(..., exact_at=lidarjax.ExactPoints("
+                           "scan, mount, heights, probe)) per mount, or exact_at=False to "
+                           "accept the grid")
+        return field
+    if heights is None:  # a scanning pattern: its own gates
+        points = scan_points(field, scan, mount, probe)
+    else:
+        points = ExactPoints(scan, mount, heights, probe)(field)
+    if src.last is None or not np.array_equal(src.last[0], points):
+        src.last = (points, src.prepare(points))
+    return src.last[1]
+
+
+def graded_warning(caller: str, field, mount: Mount, heights, what: str, why: str,
+                   fix: str) -> None:
+    """One-line `UserWarning` of `caller`: `why`, the run samples the graded grid resampled
+    from the mesh `what` (its local spacing directly above the lidar at the lowest and the
+    highest height, m) instead of the mesh's own cellPoint values; `fix`."""
+    warnings.warn(f"{caller}: {why}, so it samples the graded grid of {what}"
+                  f"{_spacing_text(field, mount, heights)}, not the mesh's own cellPoint values "
+                  f"(next to a graded ground typically 0.1 m/s off OpenFOAM's probes); {fix}",
+                  UserWarning, stacklevel=3)
+
+
+def _spacing_text(field, mount: Mount, heights) -> str:
+    """`` (local spacing 1.25 m at 10 m, 5 m at 60 m above the lidar)`` for the warning (the
+    grid's finest spacing where the lidar's place is not known on the host)."""
+    try:
+        loc = (np.asarray(mount.location, np.float64).reshape(-1, 3)[0]
+               + np.asarray(mount.location_lo, np.float64).reshape(-1, 3)[0])
+        h = np.sort(np.atleast_1d(np.asarray(heights, np.float64)).reshape(-1))
+        s = field.spacing_at(loc + h[:, None] * np.array([0.0, 0.0, 1.0]))
+        s = np.full(h.shape, field.resolution, np.float64) if s is None else np.asarray(s)
+    except (TypeError, ValueError, AttributeError, jax.errors.ConcretizationTypeError):
+        s = None  # a traced mount: where it stands is not known on the host
+    if s is None or not np.isfinite(s).any():
+        r = getattr(field, "resolution", None)
+        return "" if r is None else f" (finest spacing {r:.3g} m)"
+    ends = [(s[k], h[k]) for k in sorted({0, h.size - 1}) if np.isfinite(s[k])]
+    return " (local spacing " + ", ".join(
+        f"{a:.3g} m at {b:g} m" for a, b in ends) + " above the lidar)"
 
 
 def simulate_points(

@@ -992,10 +992,15 @@ class FieldSequence:
       returning `GridField`\\ s); a reader that prepares more than a grid per snapshot (the
       exact cellPoint values at the points a run samples, `lidarjax.io.load_field_sequence`'s
       `exact_at`) gives its own.
+    - `exact`: ``exact(points, max_snapshots) -> FieldSequence``, the same snapshots made
+      exact at `points` (an ``exact_at`` of `lidarjax.io.load_field_sequence`): a mesh's
+      sequence loaded without them, which `lidarjax.simulate_series` makes exact at a fixed
+      lidar's points (`made_exact`). None (default): the snapshots are their own data.
     """
 
     def __init__(self, times, load: Callable[[int], Any], *, max_snapshots: int = 8,
-                 name: str = "FieldSequence", assemble: Callable[..., Any] | None = None):
+                 name: str = "FieldSequence", assemble: Callable[..., Any] | None = None,
+                 exact: Callable[..., FieldSequence] | None = None):
         t = np.asarray(times, np.float64)
         if t.ndim != 1 or t.size < 2 or not np.all(np.isfinite(t)):
             raise ValueError(f"{name}: needs at least two finite snapshot times (s), got "
@@ -1011,6 +1016,7 @@ class FieldSequence:
         self.max_snapshots = int(max_snapshots)
         self._load = load
         self._assemble = assemble
+        self._exact = exact
         self._loaded: dict[int, Any] = {}
 
     def __len__(self) -> int:
@@ -1024,6 +1030,18 @@ class FieldSequence:
     def time_span(self) -> tuple[float, float]:
         """``(first, last)`` snapshot time, s."""
         return float(self.times[0]), float(self.times[-1])
+
+    @property
+    def can_be_exact(self) -> bool:
+        """Whether `made_exact` can prepare the mesh's own values at given points (a mesh's
+        sequence loaded without ``exact_at``)."""
+        return self._exact is not None
+
+    def made_exact(self, points) -> FieldSequence:
+        """The same snapshots, exact (the mesh's own cellPoint) at `points`: ``(n, 3)`` CFD
+        metres or a function of the first snapshot's `GridField` returning them (e.g.
+        `lidarjax.ExactPoints`); this sequence itself where it cannot be (`can_be_exact`)."""
+        return self if self._exact is None else self._exact(points, self.max_snapshots)
 
     def indices(self, t0: float, t1: float) -> tuple[int, int]:
         """``(first, last)`` snapshot numbers whose interval(s) cover ``[t0, t1]`` (clipped

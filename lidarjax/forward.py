@@ -17,7 +17,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._precision import difference, is_concrete
 from .angles import horizontal_speed, wind_direction
-from .beam import _cut, beam_los, probe_for_field, profile_geometry
+from .beam import _cut, beam_los, exact_by_default, probe_for_field, profile_geometry
 from .corrections import DEFAULT_RATIO_TOL, correction_factors
 from .field import AbstractField
 from .flags import Flag
@@ -162,7 +162,13 @@ def simulate(
 
     **Arguments:**
 
-    - `field`: a `lidarjax.GridField` or an analytic scene (CFD frame, m/s).
+    - `field`: a `lidarjax.GridField` or an analytic scene (CFD frame, m/s). A grid
+      `lidarjax.io.load_field` resampled from a mesh (OpenFOAM, VTK) without ``exact_at``
+      is sampled exact, the mesh's own cellPoint (what OpenFOAM's `probes` report), at every
+      point this call samples from one concrete mount (prepared here: `lidarjax.ExactPoints`,
+      for a scanning pattern `lidarjax.scan_points`); a batch or traced mount samples the
+      grid, with a one-line warning (once per field; ``load_field(..., exact_at=False)``
+      accepts the grid silently).
     - `scan`: beam geometry and reconstruction (`lidarjax.windcube_v1` etc.). A scanning
       pattern (`lidarjax.ppi`, `rhi`, `stare`, `vad`, `spinner_rosette`, a
       `lidarjax.scanning.ScanPattern`) samples its own range gates: the call is
@@ -197,10 +203,13 @@ def simulate(
         if heights is not None or u_ref is not None:
             raise ValueError("simulate: a scanning pattern samples its own range gates; drop "
                              "`heights` and `u_ref` (simulate(field, pattern, mount, probe=...)).")
+        field = exact_by_default(field, scan, mount, None, probe, "simulate")
         return simulate_scan(field, scan, mount, probe=probe)
     if heights is None:
         raise ValueError("simulate: `heights` (m above the lidar) are needed for a profiling "
                          "scan; only a scanning pattern (lidarjax.ppi, ...) samples its own gates.")
+    if isinstance(scan, Scan):  # a mesh's grid: exact at the points sampled (where known)
+        field = exact_by_default(field, scan, mount, heights, probe, "simulate")
     probe, heights = _prepared(field, scan, mount, heights, u_ref, probe, "simulate")
     if u_ref is not None:
         u_ref = jnp.asarray(u_ref)

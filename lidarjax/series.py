@@ -43,9 +43,18 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._backend import CPU_BATCH, default_batch
 from ._deprecated import deprecated_getattr
-from ._precision import HIGHEST, difference
+from ._precision import HIGHEST, difference, is_concrete
 from .angles import horizontal_speed, wind_direction
-from .beam import beam_los, probe_for_field, profile_geometry
+from .beam import (
+    ExactPoints,
+    beam_los,
+    exact_by_default,
+    graded_warning,
+    probe_for_field,
+    profile_geometry,
+    scan_points,
+    simulate_points,
+)
 from .field import AbstractField, FieldSequence
 from .flags import Flag
 from .forward import _validate
@@ -222,7 +231,8 @@ def simulate_series(
       unchanged, and an explicit count wins. ``False`` keeps the probe's nodes as given.
       A mesh sequence prepared for this run samples the same points:
       ``load_field_sequence(case, exact_at=lidarjax.ExactPoints(scan, mount, heights,
-      probe))``.
+      probe))``; an OpenFOAM sequence loaded without `exact_at` is prepared so by this call
+      for a fixed lidar (below).
     - `chunk`: with a `FieldSequence`, the most LOS cycles (rows of `Series.los`) one
       compiled call simulates; default: as many as one window of snapshots spans.
 
@@ -235,6 +245,16 @@ def simulate_series(
     window (two while the next is stacked), whatever the run's length. LOS and point samples
     outside the snapshots' span are NaN, flagged ``TIME_OUTSIDE``.
 
+    **Exact by default.** An OpenFOAM sequence loaded without ``exact_at``
+    (`lidarjax.io.load_field_sequence`) is made exact, the mesh's own cellPoint (what
+    OpenFOAM's `probes` report), at every point a fixed lidar samples, on the first window
+    (`FieldSequence.made_exact` at `lidarjax.ExactPoints`, as ``lidarjax series
+    --sequence``); a scanning pattern from a fixed mount likewise at `lidarjax.scan_points`,
+    and one snapshot's grid `lidarjax.io.load_field` resampled from a mesh without
+    ``exact_at`` (also in `simulate_statistics`). A moving lidar (or a traced mount) samples
+    the graded grid instead, with a one-line `UserWarning` naming the grid's local spacing
+    above the lidar and the fix (``exact_at=False`` at loading accepts the grid silently).
+
     **Returns:** a `Series`. Raises `ValueError` before compiling for bad inputs.
     """
     if isinstance(scan, ScanPattern):
@@ -243,6 +263,9 @@ def simulate_series(
     probe = PointProbe() if probe is None else probe
     sequence = field if isinstance(field, FieldSequence) else None
     if sequence is not None:
+        # a mesh's sequence made exact at a fixed lidar's points (the mesh's own cellPoint)
+        sequence, graded = _exact_sequence(sequence, scan, mount, heights, probe, motion,
+                                           refine_probe)
         # the window the run starts in: validated here, reused by the first chunk
         width = min(sequence.max_snapshots, len(sequence))
         try:
@@ -251,6 +274,14 @@ def simulate_series(
             first = 0  # `_check_span` below names the bad span
         first = min(first, len(sequence) - width)
         field = sequence.window(first, first + width - 1)
+        if graded is not None:
+            graded_warning("simulate_series", field, mount, heights, sequence.name, graded,
+                           "for a fixed lidar the run is exact by default; give a finer "
+                           "`spacing` to load_field_sequence (or exact_at=False to accept "
+                           "the grid)")
+    else:  # a mesh's grid (`lidarjax.io.load_field`): exact at a fixed lidar's points
+        field = exact_by_default(field, scan, mount, heights, probe, "simulate_series",
+                                 moving=motion is not None)
     _validate(field, scan, mount, np.asarray(heights), None, probe)
     if not isinstance(schedule, Schedule):
         raise ValueError(f"simulate_series: `schedule` must be a lidarjax.Schedule, got "
@@ -278,6 +309,26 @@ def simulate_series(
                        probe, motion, jnp.asarray(point_dt, field.dtype),
                        n_cycles=n_cycles, n_points=n_points, order=order,
                        duration=float(duration))
+
+
+def _exact_sequence(sequence: FieldSequence, scan, mount: Mount, heights, probe, motion,
+                    refine_probe: bool) -> tuple[FieldSequence, str | None]:
+    """`sequence` made exact (the mesh's own cellPoint) at every point a fixed lidar samples,
+    as ``lidarjax series --sequence`` prepares them (`lidarjax.ExactPoints`: the nodes this
+    run chooses); where it cannot be, the sequence as given and why (a moving lidar, a
+    traced mount) for the one-line warning. A sequence that is its own data (gridded
+    snapshots, or prepared with ``exact_at``) is returned as it is."""
+    if not sequence.can_be_exact:
+        return sequence, None
+    if motion is not None:
+        return sequence, "a moving lidar's points are not known in advance"
+    if not is_concrete(mount, heights):
+        return sequence, "a traced mount's points are not known on the host"
+    if refine_probe:
+        points = ExactPoints(scan, mount, heights, probe)
+    else:  # the probe's nodes as given
+        points = lambda grid: simulate_points(scan, mount, heights, probe)  # noqa: E731
+    return sequence.made_exact(points), None
 
 
 def _fixed(mount: Mount, motion) -> Mount | None:
@@ -463,6 +514,9 @@ def _scan_series(field, pattern, mount, heights, times, schedule, probe, motion)
         raise ValueError("simulate_series: a scanning pattern on a moving platform through a "
                          "FieldSequence is not supported; use one SnapshotField.")
     seq = field
+    if seq.can_be_exact and is_concrete(mount):
+        # a mesh's sequence exact at every point the pattern samples from the fixed mount
+        seq = seq.made_exact(lambda grid: scan_points(grid, pattern, mount, probe))
     width = min(seq.max_snapshots, len(seq))
     lo = start + np.arange(n_scans) * period
     parts = []
@@ -784,6 +838,9 @@ def simulate_statistics(
     if not isinstance(schedule, Schedule):
         raise ValueError("simulate_statistics: `schedule` must be a lidarjax.Schedule.")
     schedule.check(scan)
+    if not ensemble:  # a mesh's grid (`lidarjax.io.load_field`): exact at a fixed lidar's points
+        field = exact_by_default(field, scan, mount, heights, probe, "simulate_statistics",
+                                 moving=motion is not None)
     probe_field = jax.tree_util.tree_map(lambda a: a[0], field) if ensemble else field
     _validate(probe_field, scan, mount, np.asarray(heights), None, probe)
     if refine_probe:

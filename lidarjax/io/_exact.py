@@ -337,6 +337,24 @@ class CellPointSnapshots(_Prepared, AbstractField):
         return jnp.where(hit, exact, self.grid.los_local_at(points, d, time))
 
 
+def finite_points(points, what: str) -> np.ndarray:
+    """`points` as finite ``(n, 3)`` float64 CFD metres, n >= 1, else a one-line ValueError
+    naming `what` and the fix."""
+    try:
+        pts = np.asarray(points, np.float64).reshape(-1, 3)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be (n, 3) CFD metres (or a function of the first "
+                         f"snapshot's GridField returning them)") from None
+    if pts.shape[0] == 0:
+        raise ValueError(f"{what} must give finite (n, 3) CFD metres, n >= 1; got none")
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        raise ValueError(f"{what}: {int(bad.sum())} of {pts.shape[0]} points are not finite "
+                         f"(first: row {int(np.argmax(bad))}); give finite CFD metres (drop "
+                         f"or fix those rows)")
+    return pts
+
+
 def cellpoint_field(
     source: Any,
     grid: GridField,
@@ -360,9 +378,7 @@ def cellpoint_field(
 
     **Returns:** a `CellPointField`.
     """
-    pts = np.asarray(points, np.float64).reshape(-1, 3)
-    if pts.shape[0] == 0 or not np.isfinite(pts).all():
-        raise ValueError("cellpoint_field: `points` must be finite (n, 3) CFD metres, n >= 1")
+    pts = finite_points(points, "cellpoint_field: `points`")
     if isinstance(source, CellPointSampler):
         sampler = source
     else:

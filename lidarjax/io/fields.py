@@ -51,9 +51,10 @@ from .._util import (
     normalise_key,
     require_file,
 )
+from ..beam import register_mesh_grid
 from ..field import GridField
 from ..progress import AbstractProgress, NoProgress, TqdmProgress, progress_meter
-from ._exact import cellpoint_field
+from ._exact import cellpoint_field, finite_points
 from .openfoam import is_openfoam_case, read_openfoam_field, resample_with_sampler
 from .vtk import read_vtk_field
 
@@ -748,18 +749,30 @@ def load_field(
       a `lidarjax.io.CellPointField`: the mesh's own cellPoint interpolation (what OpenFOAM's
       `probes` report) at those points, the graded grid anywhere else. Gridded files and
       Fluent exports are returned as their `GridField` (their grid is their own data).
+      Without it (None, the default) a mesh's grid is made exact by `lidarjax.simulate`
+      itself at the points it samples from one concrete mount (the mesh's sampler over the
+      grid's cells is kept with the grid for that); a batch or traced mount samples the grid
+      with a one-line warning. ``exact_at=False``: the graded grid only, silently. Non-finite
+      points are refused (a ValueError) before the file is read.
 
     **Returns:** the field, or `(field, FieldLoadReport)` with `return_report=True` (the
     report gives e.g. the fraction of grid nodes outside the convex hull of scattered Fluent
     data, or an OpenFOAM grid's spacing and resampling error).
     """
-
+    graded_only = exact_at is False  # the graded grid only: never made exact, no warning
+    exact_at = None if graded_only else exact_at
+    if exact_at is not None and not callable(exact_at):  # before the file is read
+        exact_at = finite_points(exact_at, "load_field: `exact_at`")
     arrays, sampler = _read_field_arrays(
         path, spacing=spacing, shape=shape, progress=progress, format=format, region=region,
         time=time, max_edge_factor=max_edge_factor, chunk_rows=200_000,
     )
     velocity = arrays.velocity if dtype is None else arrays.velocity.astype(dtype)
     field = GridField(arrays.x, arrays.y, arrays.z, velocity)
+    if exact_at is None and sampler is not None and not graded_only:
+        # the points are known when `lidarjax.simulate` samples it: exact there by default
+        register_mesh_grid(field, lambda points, grid=field: cellpoint_field(sampler, grid, points),
+                           arrays.report.path)
     if exact_at is not None and sampler is not None:
         points = exact_at(field) if callable(exact_at) else exact_at
         field = cellpoint_field(sampler, field, points)
