@@ -122,8 +122,8 @@ class RegionBox:
 
 @dataclasses.dataclass(frozen=True)
 class RegionPolygon:
-    """A polygon of candidate locations in the horizontal plane, `height` (m) above the
-    surface.
+    """A polygon of candidate locations in the horizontal plane (its edges included), `height`
+    (m) above the surface.
 
     - `vertices`: ``(n, 2)`` CFD ``(x, y)`` metres, ``n >= 3``, in order (either sense).
     - `height`: metres above the surface (the lidar's beam origin).
