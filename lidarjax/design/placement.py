@@ -439,6 +439,14 @@ def _field_extent(field):
     return None
 
 
+def _degrees(fname, name, value):
+    """`value` as finite degrees ``(s,)``, at least one, or one line naming `name`."""
+    d = np.asarray(value, np.float64).ravel()
+    if d.size == 0 or not np.all(np.isfinite(d)):
+        raise ValueError(f"{fname}: `{name}` must be finite degrees, at least one.")
+    return d
+
+
 def _directions_setup(fname, field, mount, u_ref, directions, rotations, pivot):
     """Fields, batched template mount, free streams ``(s, 3)``, rotations ``(s,)``, pivot."""
     if not isinstance(mount, Mount) or mount.batch_shape:
@@ -457,9 +465,7 @@ def _directions_setup(fname, field, mount, u_ref, directions, rotations, pivot):
             raise ValueError(f"{fname}: `directions` needs one scene with its own `direction` "
                              f"(e.g. lidarjax.scenes.hemisphere); for a CFD run use "
                              f"`rotations` (rotated platform) or one field per direction.")
-        d = np.asarray(directions, np.float64).ravel()
-        if d.size == 0 or not np.all(np.isfinite(d)):
-            raise ValueError(f"{fname}: `directions` must be finite degrees, at least one.")
+        d = _degrees(fname, "directions", directions)
         dt = field.dtype
         stacked = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (d.size,) + a.shape),
                                          field)
@@ -477,9 +483,7 @@ def _directions_setup(fname, field, mount, u_ref, directions, rotations, pivot):
         if not single:
             raise ValueError(f"{fname}: `rotations` rotate the platform in one run; give one "
                              f"field.")
-        rot = np.asarray(rotations, np.float64).ravel()
-        if rot.size == 0 or not np.all(np.isfinite(rot)):
-            raise ValueError(f"{fname}: `rotations` must be finite degrees, at least one.")
+        rot = _degrees(fname, "rotations", rotations)
         if pivot is None:
             raise ValueError(f"{fname}: `rotations` need the `pivot` (x, y) the platform turns "
                              f"about, CFD metres.")
