@@ -41,9 +41,10 @@ than `min_clearance` to a solid (the field is sampled at the location and at 26 
 sphere of that radius around it), outside the polygon, or with a non-finite objective.
 
 **Search**: a coarse grid of about `n_coarse` locations (at the initial cone angle and
-heading), then BFGS (optimistix, or the `solver` given) from the `n_starts` best feasible ones,
-all starts in one compiled program (`jax.vmap`); every number (location, angles, weights) is a
-dynamic input, so new candidates never recompile.
+heading), then a projected BFGS in the region's bounding box (`_search.BoxBFGS`: it stops
+exactly on a bound where the optimum lies there), or the optimistix `solver` given, from the
+`n_starts` best feasible ones, all starts in one compiled program (`jax.vmap`); every number
+(location, angles, weights) is a dynamic input, so new candidates never recompile.
 """
 
 from __future__ import annotations
@@ -121,8 +122,8 @@ class RegionBox:
 
 @dataclasses.dataclass(frozen=True)
 class RegionPolygon:
-    """A polygon of candidate locations in the horizontal plane, `height` (m) above the
-    surface.
+    """A polygon of candidate locations in the horizontal plane (its edges included), `height`
+    (m) above the surface.
 
     - `vertices`: ``(n, 2)`` CFD ``(x, y)`` metres, ``n >= 3``, in order (either sense).
     - `height`: metres above the surface (the lidar's beam origin).
@@ -197,8 +198,11 @@ class _Problem(eqx.Module):
 
 
 def _bilinear(xs, ys, table, x, y):
+    """Bilinear in the surface table; on a node line, the cell above it (as the field's
+    trilinear sampling: one side's derivative for both)."""
+
     def locate(axis, v):
-        i = jnp.clip(jnp.searchsorted(axis, v) - 1, 0, axis.shape[0] - 2)
+        i = jnp.clip(jnp.searchsorted(axis, v, side="right") - 1, 0, axis.shape[0] - 2)
         t = (v - axis[i]) / (axis[i + 1] - axis[i])
         return i, jnp.clip(t, 0.0, 1.0)
 
@@ -210,12 +214,21 @@ def _bilinear(xs, ys, table, x, y):
 
 
 def _inside_polygon(v, x, y):
-    """Even-odd rule."""
+    """Inside by the even-odd rule, or on an edge (the polygon is closed: an optimum on
+    its boundary is feasible)."""
     x0, y0 = v[:, 0], v[:, 1]
     x1, y1 = jnp.roll(x0, -1), jnp.roll(y0, -1)
     crosses = (y0 > y) != (y1 > y)
     xc = x0 + (y - y0) * (x1 - x0) / jnp.where(y1 != y0, y1 - y0, 1.0)
-    return jnp.sum(crosses & (x < xc)) % 2 == 1
+    inside = jnp.sum(crosses & (x < xc)) % 2 == 1
+    ex, ey, px, py = x1 - x0, y1 - y0, x - x0, y - y0
+    along = ex * px + ey * py
+    length2 = ex**2 + ey**2
+    cross = ex * py - ey * px
+    eps = 8 * jnp.finfo(jnp.result_type(x)).eps
+    on_edge = (jnp.abs(cross) <= eps * length2 + eps * jnp.abs(along)) & (along >= 0) & (
+        along <= length2)
+    return inside | jnp.any(on_edge)
 
 
 def box_location(base, free, x):
@@ -426,6 +439,14 @@ def _field_extent(field):
     return None
 
 
+def _degrees(fname, name, value):
+    """`value` as finite degrees ``(s,)``, at least one, or one line naming `name`."""
+    d = np.asarray(value, np.float64).ravel()
+    if d.size == 0 or not np.all(np.isfinite(d)):
+        raise ValueError(f"{fname}: `{name}` must be finite degrees, at least one.")
+    return d
+
+
 def _directions_setup(fname, field, mount, u_ref, directions, rotations, pivot):
     """Fields, batched template mount, free streams ``(s, 3)``, rotations ``(s,)``, pivot."""
     if not isinstance(mount, Mount) or mount.batch_shape:
@@ -444,9 +465,7 @@ def _directions_setup(fname, field, mount, u_ref, directions, rotations, pivot):
             raise ValueError(f"{fname}: `directions` needs one scene with its own `direction` "
                              f"(e.g. lidarjax.scenes.hemisphere); for a CFD run use "
                              f"`rotations` (rotated platform) or one field per direction.")
-        d = np.asarray(directions, np.float64).ravel()
-        if d.size == 0 or not np.all(np.isfinite(d)):
-            raise ValueError(f"{fname}: `directions` must be finite degrees, at least one.")
+        d = _degrees(fname, "directions", directions)
         dt = field.dtype
         stacked = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (d.size,) + a.shape),
                                          field)
@@ -464,9 +483,7 @@ def _directions_setup(fname, field, mount, u_ref, directions, rotations, pivot):
         if not single:
             raise ValueError(f"{fname}: `rotations` rotate the platform in one run; give one "
                              f"field.")
-        rot = np.asarray(rotations, np.float64).ravel()
-        if rot.size == 0 or not np.all(np.isfinite(rot)):
-            raise ValueError(f"{fname}: `rotations` must be finite degrees, at least one.")
+        rot = _degrees(fname, "rotations", rotations)
         if pivot is None:
             raise ValueError(f"{fname}: `rotations` need the `pivot` (x, y) the platform turns "
                              f"about, CFD metres.")
@@ -512,13 +529,9 @@ def _bounds_arg(fname, name, value):
     return b
 
 
-def placement_problem(field, scan, mount, heights, region, *, u_ref=None, directions=None,
-                      rotations=None, pivot=None, weights=None, objective="worst", target="free",
-                      smoothing="pnorm", p=8.0, temperature=0.005, direction_weight=0.01,
-                      std=None, min_clearance=0.0, cone_angle=None, heading=None, probe=None,
-                      ratio_tol=DEFAULT_RATIO_TOL, fname="design_placement"):
-    """Validate and assemble the compiled problem (`design_placement`'s arguments). Returns
-    ``(problem, lo, hi, x_init)``: the objective is ``placement_objective(problem, x)``."""
+def _check_options(fname, region, scan, objective, target, smoothing, p, temperature,
+                   direction_weight, min_clearance):
+    """One-line errors for the region's type and the objective's options."""
     if not isinstance(region, RegionBox | RegionPolygon):
         raise ValueError(f"{fname}: `region` must be a lidarjax.RegionBox or RegionPolygon, got "
                          f"{type(region).__name__}.")
@@ -539,14 +552,108 @@ def placement_problem(field, scan, mount, heights, region, *, u_ref=None, direct
         raise ValueError(f"{fname}: `min_clearance` must be >= 0 m, got {min_clearance!r}.")
     if not isinstance(scan, Scan):
         raise ValueError(f"{fname}: `scan` must be a profiling lidarjax.Scan (windcube_v1, ...).")
-    field, batched, u_refs, rot, piv = _directions_setup(fname, field, mount, u_ref, directions,
-                                                         rotations, pivot)
-    s = rot.size
+
+
+def _rose_weights(fname, weights, s):
+    """The wind rose's weights ``(s,)``, normalised."""
     w = np.ones(s) if weights is None else np.asarray(weights, np.float64).ravel()
     if w.shape != (s,) or not np.all(np.isfinite(w)) or np.any(w < 0) or not w.sum() > 0:
         raise ValueError(f"{fname}: `weights` (the wind rose) must be {s} finite values >= 0, "
                          f"not all 0; got shape {w.shape}.")
-    w = w / w.sum()
+    return w / w.sum()
+
+
+def _check_region_on_grid(fname, region, field):
+    """A region that lies off a `GridField` in some coordinate: one line naming it."""
+    extent = _field_extent(field)
+    if extent is None:
+        return
+    rlo, rhi = np.zeros(3), np.zeros(3)
+    if isinstance(region, RegionBox):
+        rlo, rhi = np.asarray(region.lo), np.asarray(region.hi)
+        dims = range(3)
+    else:
+        rlo[:2], rhi[:2] = region.bounds()
+        dims = range(2)
+    out = [("xyz"[i], rlo[i], rhi[i]) for i in dims
+           if rhi[i] < extent[0][i] or rlo[i] > extent[1][i]]
+    if out:
+        a, r0, r1 = out[0]
+        raise ValueError(f"{fname}: the region lies outside the grid in {a} ([{r0:g}, "
+                         f"{r1:g}] m; the grid spans [{extent[0]['xyz'.index(a)]:g}, "
+                         f"{extent[1]['xyz'.index(a)]:g}] m); move the region onto the "
+                         f"grid.")
+
+
+def _decision_variables(region, mount, scan, cone_b, head_b):
+    """Names, bounds ``lo``, ``hi`` and the initial guess of the decision variables: the
+    region's free coordinates, then the cone angle and the heading offset if asked for."""
+    lo, hi = (list(b) for b in region.bounds())
+    names = list(region.names)
+    x_init = list(np.asarray(mount.location, np.float64)[list(region.free)])
+    for name, b, init in (("cone_angle", cone_b, lambda: float(scan.cone_angle)),
+                          ("heading", head_b, lambda: 0.0)):
+        if b is not None:
+            names.append(name)
+            lo.append(b[0])
+            hi.append(b[1])
+            x_init.append(float(np.clip(init(), b[0], b[1])))
+    return names, lo, hi, np.clip(np.asarray(x_init), lo, hi)
+
+
+def _region_surface(fname, region, field, axes, dtype):
+    """How the location follows from the decision variables: ``(kind, base, vertices,
+    surface_kind, surface_fn, surface_axes, surface_table)`` (`_Problem`)."""
+    base = np.zeros(3)
+    if isinstance(region, RegionBox):
+        return "box", np.asarray(region.lo), None, "plane", None, None, None
+    vertices = jnp.asarray(np.asarray(region.vertices), dtype)
+    surf = region.surface
+    if callable(surf):
+        return "polygon", base, vertices, "callable", surf, None, None
+    if surf is None and isinstance(field, GridField):
+        sx, sy, table = _surface_table(_first_field(field, axes))
+        if not np.any(np.isfinite(table)):
+            raise ValueError(f"{fname}: the grid is solid everywhere; no surface to stand on.")
+        table = np.where(np.isfinite(table), table, np.nanmax(table) + 1e6)
+        return ("polygon", base, vertices, "grid", None,
+                (jnp.asarray(sx, dtype), jnp.asarray(sy, dtype)), jnp.asarray(table, dtype))
+    # a plane at the given z, or for a scene the plane z = 0 of the CFD frame
+    base[2] = 0.0 if surf is None else float(surf)
+    return "polygon", base, vertices, "plane", None, None, None
+
+
+def _installation_covariance(fname, objective, std, dtype):
+    """For ``objective="uncertainty"``: the installation inputs' names and the symmetric
+    square root of their covariance (from `std`); else ``((), None)``."""
+    if objective != "uncertainty":
+        return (), None
+    if not isinstance(std, Mapping) or not std:
+        raise ValueError(f"{fname}: objective='uncertainty' needs `std`, the installation's "
+                         f"standard uncertainties, e.g. {{'epsilon': 0.5, 'pitch': 0.2}}.")
+    in_names = _expand(list(std), fname)
+    bad = [n for n in in_names if n in ("speed", "direction") or n.startswith("scene.")]
+    if bad:
+        raise ValueError(f"{fname}: `std` names installation inputs only, not {bad}.")
+    std_in, corr = _covariance(in_names, std, None, fname)
+    cov = np.outer(std_in, std_in) * corr
+    wv, vv = np.linalg.eigh(cov)
+    return in_names, jnp.asarray((vv * np.sqrt(np.clip(wv, 0, None))) @ vv.T, dtype)
+
+
+def placement_problem(field, scan, mount, heights, region, *, u_ref=None, directions=None,
+                      rotations=None, pivot=None, weights=None, objective="worst", target="free",
+                      smoothing="pnorm", p=8.0, temperature=0.005, direction_weight=0.01,
+                      std=None, min_clearance=0.0, cone_angle=None, heading=None, probe=None,
+                      ratio_tol=DEFAULT_RATIO_TOL, fname="design_placement"):
+    """Validate and assemble the compiled problem (`design_placement`'s arguments). Returns
+    ``(problem, lo, hi, x_init, names)``: the objective is ``placement_objective(problem,
+    x)``, `lo`, `hi` the decision variables' bounds and `names` their names."""
+    _check_options(fname, region, scan, objective, target, smoothing, p, temperature,
+                   direction_weight, min_clearance)
+    field, batched, u_refs, rot, piv = _directions_setup(fname, field, mount, u_ref, directions,
+                                                         rotations, pivot)
+    w = _rose_weights(fname, weights, rot.size)
     field, batched, u_refs, heights, probe, axes, _ = rotation_arguments(
         fname, field, scan, batched, heights, u_refs, probe)
     dtype = field.dtype
@@ -554,77 +661,11 @@ def placement_problem(field, scan, mount, heights, region, *, u_ref=None, direct
     head_b = _bounds_arg(fname, "heading", heading)
     if cone_b is not None and not (0 < cone_b[0] and cone_b[1] < 90):
         raise ValueError(f"{fname}: `cone_angle` bounds must lie in (0, 90) degrees.")
-    lo, hi = region.bounds()
-    extent = _field_extent(field)
-    if extent is not None:
-        rlo = np.zeros(3)
-        rhi = np.zeros(3)
-        if isinstance(region, RegionBox):
-            rlo, rhi = np.asarray(region.lo), np.asarray(region.hi)
-            dims = range(3)
-        else:
-            rlo[:2], rhi[:2] = lo, hi
-            dims = range(2)
-        out = [("xyz"[i], rlo[i], rhi[i]) for i in dims
-               if rhi[i] < extent[0][i] or rlo[i] > extent[1][i]]
-        if out:
-            a, r0, r1 = out[0]
-            raise ValueError(f"{fname}: the region lies outside the grid in {a} ([{r0:g}, "
-                             f"{r1:g}] m; the grid spans [{extent[0]['xyz'.index(a)]:g}, "
-                             f"{extent[1]['xyz'.index(a)]:g}] m); move the region onto the "
-                             f"grid.")
-    names = list(region.names)
-    x_init = list(np.asarray(mount.location, np.float64)[list(region.free)])
-    lo, hi = list(lo), list(hi)
-    if cone_b is not None:
-        names.append("cone_angle")
-        lo.append(cone_b[0])
-        hi.append(cone_b[1])
-        x_init.append(float(np.clip(float(scan.cone_angle), cone_b[0], cone_b[1])))
-    if head_b is not None:
-        names.append("heading")
-        lo.append(head_b[0])
-        hi.append(head_b[1])
-        x_init.append(float(np.clip(0.0, head_b[0], head_b[1])))
-    x_init = np.clip(np.asarray(x_init), lo, hi)
-    surface_kind, surface_fn, s_axes, s_table = "plane", None, None, None
-    base = np.zeros(3)
-    vertices = None
-    if isinstance(region, RegionBox):
-        kind = "box"
-        base = np.asarray(region.lo)
-    else:
-        kind = "polygon"
-        vertices = jnp.asarray(np.asarray(region.vertices), dtype)
-        surf = region.surface
-        if callable(surf):
-            surface_kind, surface_fn = "callable", surf
-        elif surf is None and isinstance(field, GridField):
-            sx, sy, table = _surface_table(_first_field(field, axes))
-            if not np.any(np.isfinite(table)):
-                raise ValueError(f"{fname}: the grid is solid everywhere; no surface to stand on.")
-            table = np.where(np.isfinite(table), table, np.nanmax(table) + 1e6)
-            surface_kind = "grid"
-            s_axes = (jnp.asarray(sx, dtype), jnp.asarray(sy, dtype))
-            s_table = jnp.asarray(table, dtype)
-        elif surf is not None:
-            base[2] = float(surf)
-        else:  # a scene: the plane z = 0 of the CFD frame
-            base[2] = 0.0
-    chol = None
-    in_names: tuple = ()
-    if objective == "uncertainty":
-        if not isinstance(std, Mapping) or not std:
-            raise ValueError(f"{fname}: objective='uncertainty' needs `std`, the installation's "
-                             f"standard uncertainties, e.g. {{'epsilon': 0.5, 'pitch': 0.2}}.")
-        in_names = _expand(list(std), fname)
-        bad = [n for n in in_names if n in ("speed", "direction") or n.startswith("scene.")]
-        if bad:
-            raise ValueError(f"{fname}: `std` names installation inputs only, not {bad}.")
-        std_in, corr = _covariance(in_names, std, None, fname)
-        cov = np.outer(std_in, std_in) * corr
-        wv, vv = np.linalg.eigh(cov)
-        chol = jnp.asarray((vv * np.sqrt(np.clip(wv, 0, None))) @ vv.T, dtype)
+    _check_region_on_grid(fname, region, field)
+    names, lo, hi, x_init = _decision_variables(region, mount, scan, cone_b, head_b)
+    kind, base, vertices, surface_kind, surface_fn, s_axes, s_table = _region_surface(
+        fname, region, field, axes, dtype)
+    in_names, chol = _installation_covariance(fname, objective, std, dtype)
     problem = _Problem(
         field=field, scan=scan, mount=batched, heights=heights, u_refs=jnp.asarray(u_refs, dtype),
         rotations=jnp.asarray(rot, dtype), pivot=jnp.asarray(piv, dtype),
@@ -636,7 +677,8 @@ def placement_problem(field, scan, mount, heights, region, *, u_ref=None, direct
         direction_weight=jnp.asarray(direction_weight, dtype), chol=chol, probe=probe,
         axes=axes, kind=kind, surface_kind=surface_kind, surface_fn=surface_fn,
         free=tuple(region.free), has_cone=cone_b is not None, has_heading=head_b is not None,
-        objective=objective, target=target, smoothing=smoothing, names=in_names, ratio_tol=float(ratio_tol))
+        objective=objective, target=target, smoothing=smoothing, names=in_names,
+        ratio_tol=float(ratio_tol))
     return problem, jnp.asarray(lo, dtype), jnp.asarray(hi, dtype), x_init, tuple(names)
 
 
@@ -733,8 +775,11 @@ def design_placement(
       heading offset (added to ``gamma``) too; None keeps them fixed.
     - `n_coarse`: about how many locations the coarse stage evaluates (a regular grid over
       the decision variables); `n_starts`: local searches from the best of them.
-    - `solver`: an `optimistix.AbstractMinimiser` with ``init/step/terminate`` (default
-      ``optimistix.BFGS(rtol=1e-6, atol=1e-9)``, looser in float32); `max_steps`: steps per local search.
+    - `solver`: the local search: default `lidarjax.design._search.BoxBFGS` (projected BFGS
+      that stops on a bound, ``rtol=1e-6, atol=1e-9``, looser in float32), or an
+      `optimistix.AbstractMinimiser` with ``init/step/terminate`` (in unbounded sigmoid
+      variables: it never reaches a bound); `max_steps`: steps (objective evaluations) per
+      local search.
     - `batch_size`: coarse candidates evaluated at once.
     - `fast_compile`: on a CPU, compile the search's one program with XLA's quick code
       generation (about 3x faster to compile, slower to run; the search runs in a fraction of
@@ -746,10 +791,8 @@ def design_placement(
     gives a `Placement` with ``feasible=False`` and a message (no optimum reported).
     """
     fname = "design_placement"
-    for name, val in (("n_coarse", n_coarse), ("n_starts", n_starts), ("max_steps", max_steps),
-                      ("batch_size", batch_size)):
-        if int(val) != val or val < 1:
-            raise ValueError(f"{fname}: `{name}` must be a positive integer, got {val!r}.")
+    _search.check_counts(fname, n_coarse=n_coarse, n_starts=n_starts, max_steps=max_steps,
+                         batch_size=batch_size)
     problem, lo, hi, x_init, names = placement_problem(
         field, scan, mount, heights, region, u_ref=u_ref, directions=directions,
         rotations=rotations, pivot=pivot, weights=weights, objective=objective, target=target,
@@ -783,8 +826,7 @@ def design_placement(
     if isinstance(objective, str) and objective != "uncertainty":
         worst, rms = _errors(problem, u1, th1)
     converged = bool(res["converged"])
-    msg = "converged" if converged else (
-        "the local search stopped at max_steps; the best feasible point found is reported")
+    msg = _search.message(converged)
     return Placement(names, res["x"], np.asarray(loc, np.float64), res["value"],
                      np.asarray(res["gradient"], np.float64), worst, rms, res["start"],
                      res["start_value"], res["path"], res["path_values"], _rose(u0, th0, d0, target),

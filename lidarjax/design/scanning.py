@@ -167,12 +167,6 @@ def _check_region(fname, name, region):
                          f"lidarjax.design.RegionRing, got {type(region).__name__}.")
 
 
-def _positive_int(fname, name, val):
-    if int(val) != val or val < 1:
-        raise ValueError(f"{fname}: `{name}` must be a positive integer, got {val!r}.")
-    return int(val)
-
-
 def design_dual_doppler(
     points: Float[ArrayLike, "p 3"],
     region_a: RegionBox | RegionRing,
@@ -213,8 +207,7 @@ def design_dual_doppler(
         raise ValueError(f"{fname}: `weights` must be {p} finite values >= 0, not all 0.")
     if not (np.isfinite(sigma) and sigma > 0):
         raise ValueError(f"{fname}: `sigma` must be > 0 m/s, got {sigma!r}.")
-    for name, val in (("n_coarse", n_coarse), ("n_starts", n_starts), ("max_steps", max_steps)):
-        _positive_int(fname, name, val)
+    _search.check_counts(fname, n_coarse=n_coarse, n_starts=n_starts, max_steps=max_steps)
     dtype = jnp.result_type(float)
     lo_a, hi_a = region_a.bounds()
     lo_b, hi_b = region_b.bounds()
@@ -240,8 +233,7 @@ def design_dual_doppler(
                              np.asarray(res["gradient"]), np.asarray(var), np.asarray(crossing),
                              res["start"], res["start_value"], res["path"], res["path_values"],
                              n_eval, True, bool(res["converged"]),
-                             "converged" if res["converged"] else
-                             "the local search stopped at max_steps; the best point is reported")
+                             _search.message(bool(res["converged"])))
 
 
 # ------------------------------------------------------------------------------------------
@@ -385,8 +377,7 @@ def design_vad(
     if not (0 < lo_e < hi_e < 90):
         raise ValueError(f"{fname}: `elevation` must be (low, high) degrees in (0, 90) with "
                          f"low < high, got {elevation!r}.")
-    for name, val in (("n_coarse", n_coarse), ("n_starts", n_starts), ("max_steps", max_steps)):
-        _positive_int(fname, name, val)
+    _search.check_counts(fname, n_coarse=n_coarse, n_starts=n_starts, max_steps=max_steps)
     pb = _vad_problem(fname, heights, n_rays, sigma, range_ref, range_exponent, scan_time,
                       move_time)
     dt = pb.heights.dtype
@@ -409,5 +400,4 @@ def design_vad(
     r = results[k]
     return VadDesign(float(r["x"][0]), counts[k], float(r["value"]), float(r["gradient"][0]),
                      np.asarray(r["aux"]), np.asarray(counts), elevations, values, n_eval, True,
-                     bool(r["converged"]),
-                     "converged" if r["converged"] else "the local search stopped at max_steps")
+                     bool(r["converged"]), _search.message(bool(r["converged"])))

@@ -50,11 +50,13 @@ def roof():
     # points of `test_reported_gradient_matches_central_differences`
     grid = _grid((-12.0, -12.0), (12.0, 12.0), 50)  # 2,500 candidates x 12 directions
     fd_points = _fd_points([res.x, FD_X0])
-    values, ok = evaluate_placements(problem, np.concatenate([grid, fd_points]))
-    n = grid.shape[0]
-    return res, problem, (grid, values[:n], ok[:n]), values[n:]
+    values, ok = evaluate_placements(problem, np.concatenate([grid, fd_points, EDGE]))
+    n, m = grid.shape[0], fd_points.shape[0]
+    return res, problem, (grid, values[:n], ok[:n]), values[n:n + m], values[n + m:]
 
 
+#: the edge x = -5 m of `test_optimum_on_a_regions_edge_or_corner_converges_there`'s region
+EDGE = np.stack([np.full(61, -5.0), np.linspace(-3.0, 3.0, 61)], -1)
 FD_X0 = np.array([3.0, -5.0])  # a point off the optimum, where the gradient is not small
 FD_H = 1e-5
 
@@ -71,7 +73,7 @@ def _central(values, n_points, d):
 
 
 def test_hemisphere_roof_matches_dense_grid_search_with_10x_fewer_evaluations(roof):
-    res, problem, (grid, values, ok), _ = roof
+    res, problem, (grid, values, ok), *_ = roof
     assert res.feasible and res.converged and res.names == ("x", "y")
     assert ok.mean() > 0.5  # some corners see a beam through the dome
     best = np.nanmin(values)
@@ -98,11 +100,39 @@ def test_reported_gradient_matches_central_differences(roof):
     grid search, `roof`)."""
     import jax
 
-    res, problem, _, fd_values = roof
+    res, problem, _, fd_values, _ = roof
     fd = _central(fd_values, 2, 2)
     g = np.asarray(jax.grad(lambda x: placement_objective(problem, x)[0])(jnp.asarray(FD_X0)))
     np.testing.assert_allclose(res.gradient, fd[0], rtol=1e-4, atol=1e-8)
     np.testing.assert_allclose(g, fd[1], rtol=1e-4, atol=1e-8)
+
+
+def test_optimum_on_a_regions_edge_or_corner_converges_there(roof):
+    """Squares of the roof beside its optimum (x = -6.8 m, y = 0; the same compiled search):
+    east of it the optimum lies on the west edge x = -5 m, the best of that edge; north-east
+    of it on the corner (-1, 6) m, the best of the dense grid's candidates in the square.
+    Both end exactly on the bound, converged, the gradient pointing out of the region."""
+    _, problem, (grid, values, ok), _, edge_values = roof
+    east = RegionPolygon([(-5.0, -3.0), (-1.0, -3.0), (-1.0, 3.0), (-5.0, 3.0)], height=1.0,
+                         surface=dome)
+    res = design_placement(lj.scenes.hemisphere(radius=R, speed=10.0), lj.windcube_v1(),
+                           lj.Mount([-3.0, 2.0, 21.0]), HEIGHTS, east, directions=DIRS,
+                           weights=ROSE)
+    assert res.converged and res.message == "converged"
+    assert res.x[0] == -5.0 and res.gradient[0] > 0 and abs(res.gradient[1]) < 1e-9
+    assert res.value <= np.min(edge_values) + 1e-12
+    # the objective is even in y (the rose and the directions are): two minima on the edge
+    assert abs(abs(res.x[1]) - abs(EDGE[np.argmin(edge_values), 1])) <= 0.1  # 0.1 m spacing
+    assert res.path.shape[0] <= 12
+    north_east = RegionPolygon([(-5.0, 2.0), (-1.0, 2.0), (-1.0, 6.0), (-5.0, 6.0)],
+                               height=1.0, surface=dome)
+    res = design_placement(lj.scenes.hemisphere(radius=R, speed=10.0), lj.windcube_v1(),
+                           lj.Mount([-3.0, 4.0, 21.0]), HEIGHTS, north_east, directions=DIRS,
+                           weights=ROSE)
+    assert res.converged and res.x.tolist() == [-1.0, 6.0] and np.all(res.gradient < 0)
+    inside = ok & np.all((grid >= [-5.0, 2.0]) & (grid <= [-1.0, 6.0]), axis=1)
+    assert inside.sum() > 50 and res.value <= np.min(values[inside])
+    np.testing.assert_allclose(res.location[2], float(dome(-1.0, 6.0)) + 1.0, rtol=1e-12)
 
 
 def test_objective_surrogates_bound_the_exact_worst(roof):

@@ -95,6 +95,20 @@ def test_vad_variance_closed_form_and_design():
     res = design_vad([50.0, 100.0], n_rays=[4, 8, 16], range_exponent=1.0, scan_time=20.0,
                      move_time=1.0, n_coarse=8)
     assert res.n_rays == 4 and abs(res.elevation - 45.0) < 0.01
+    # optima on the elevation's bounds (the same compiled search): with equal noise the
+    # lowest elevation wins (4 sigma^2 / (n cos^2 e) grows with e); with noise growing as
+    # range^2 an upper bound below atan(sqrt(2)) = 54.7 degrees wins; both converge there
+    for kw, bound in ((dict(range_exponent=0.0), 5.0),
+                      (dict(range_exponent=2.0, elevation=(5.0, 40.0)), 40.0)):
+        res = design_vad([50.0, 100.0], n_rays=[4, 8, 16], n_coarse=8, **kw)
+        assert res.converged and res.message == "converged"
+        assert res.elevation == bound and res.n_rays == 16
+        e = np.deg2rad(bound)
+        k = kw["range_exponent"]
+        want = np.mean([4 * 0.01 * (h / (100.0 * np.sin(e))) ** (2 * k) / (16 * np.cos(e) ** 2)
+                        for h in (50.0, 100.0)])
+        assert res.value == pytest.approx(want, rel=1e-12)
+        assert res.gradient * (1.0 if bound == 5.0 else -1.0) > 0  # pointing out of the box
     # (the heights and ray counts of the call above: its compiled search serves this one)
     res = design_vad([50.0, 100.0], n_rays=[4, 8, 16], scan_time=6.0, move_time=1.0,
                      n_coarse=8)
