@@ -152,7 +152,8 @@ def test_dask_workers_start_when_the_default_dashboard_port_is_taken():
     import socket
     from types import SimpleNamespace
 
-    pytest.importorskip("distributed")
+    import distributed  # noqa: F401  (the test extra brings it)
+
     from lidarjax.cli._dask import dask_client
 
     held = socket.socket()

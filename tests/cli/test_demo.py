@@ -3,13 +3,11 @@ loadfile` can start it early on one worker while the other runs the rest)."""
 
 import json
 
-import pytest
-
 from lidarjax.cli import main
 
 
 def test_demo_runs_end_to_end(tmp_path, capsys):
-    pytest.importorskip("matplotlib")
+    import matplotlib  # noqa: F401  (the test extra brings it)
     assert main(["demo", "--out", str(tmp_path / "demo")]) == 0
     text = capsys.readouterr().out
     assert "C_U = U / U_free" in text and "corrected" in text

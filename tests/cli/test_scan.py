@@ -8,14 +8,13 @@ import io
 
 import numpy as np
 import pytest
+import xarray  # noqa: F401  (the test extra brings it)
 
 import lidarjax as lj
 from lidarjax.cli import main
 from lidarjax.io import read_scan_netcdf
 
 from ..helpers import DATA
-
-pytest.importorskip("xarray")
 
 
 def test_ppi_preset_written_and_equal_to_the_api(tmp_path, capsys):
@@ -103,7 +102,7 @@ def test_polar_cells_are_the_gates_between_ray_edges_and_gate_ends():
 def test_scan_file_plot_measured_beside_simulated_rejected_grey(tmp_path):
     """`lidarjax scan FILE --plot`: the file's own Doppler (intensity threshold applied)
     beside the simulation, rejected gates grey, one diverging scale centred on zero."""
-    matplotlib = pytest.importorskip("matplotlib")
+    import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+import xarray  # noqa: F401  (the test extra brings it)
 
 import lidarjax as lj
 from lidarjax.cli import main
@@ -17,8 +18,6 @@ from lidarjax.cli._scanning import scan_region
 from lidarjax.io import Settings, read_scan_netcdf, read_table_csv, save_field_npz, write_settings
 
 from ..helpers import DATA, scanning_file, write_hpl
-
-pytest.importorskip("xarray")
 
 HPL = DATA / "scanning" / "RHI_77_20260921_000812.hpl"  # the committed real Halo RHI
 WIND = np.array([3.0, -4.0, 0.5])  # uniform CFD wind, m/s
@@ -261,7 +260,8 @@ def test_series_on_a_mesh_is_its_cellpoint_at_the_gates(tmp_path, capsys, monkey
     cellPoint at every gate, as `simulate --scan` does: with a calm box (TI 1e-9) each gate
     is ``n . U`` of OpenFOAM's cellPoint there (`sample_openfoam`, numpy) to 1e-7 m/s; the
     graded grid alone is off by more."""
-    pytest.importorskip("foamlib")
+    import foamlib  # noqa: F401  (the test extra brings it)
+
     from lidarjax.io import load_field
     from lidarjax.io.openfoam import read_openfoam_field, sample_openfoam
 

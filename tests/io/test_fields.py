@@ -260,7 +260,7 @@ def test_netcdf_needs_xarray(tmp_path, monkeypatch):
 
 
 def test_netcdf_round_trip_and_dimension_order(tmp_path):
-    xr = pytest.importorskip("xarray")
+    import xarray as xr
     x, y, z, vel = gridded()
     path = save_field_netcdf(tmp_path / "f.nc", (x, y, z, vel), {"source": "test"})
     a = read_field_arrays(path)

@@ -72,7 +72,7 @@ def test_every_real_file_agrees_with_doppy(name, cut_folder):
     """Header numbers, ray times, angles, Doppler, intensity, beta (and spectral width) of
     every real file equal doppy's reading of it, value for value (both convert the same
     decimal text: bitwise equal), and the rays are grouped into the header's scans."""
-    doppy = pytest.importorskip("doppy")
+    import doppy
     path = _path(name, cut_folder)
     rays, per_scan, scans, warning = REAL[name]
     scan = _read(path, warning)
@@ -244,7 +244,7 @@ def test_user_scan_older_layout_and_no_final_newline(tmp_path):
     assert s.pitch is None and s.roll is None and s.rays_per_scan == 3
     np.testing.assert_array_equal(s.azimuth, az)
     np.testing.assert_array_equal(s.doppler, dop)
-    doppy = pytest.importorskip("doppy")
+    import doppy
     ref = doppy.raw.HaloHpl.from_src(path)
     np.testing.assert_array_equal(s.doppler, ref.radial_velocity)
     assert ref.pitch is None and ref.header.nwaypoints == 3

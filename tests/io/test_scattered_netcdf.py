@@ -58,7 +58,7 @@ def test_fluent_repeated_columns_are_tolerated(tmp_path):
 
 
 def test_netcdf_names_in_any_case_and_missing_names_listed(tmp_path):
-    xr = pytest.importorskip("xarray")
+    import xarray as xr
     x, y, z = np.arange(4.0), np.arange(5.0), np.arange(3.0)
     vel = np.random.default_rng(1).random((3, 4, 5))  # stored (Z, X, Y)
     ds = xr.Dataset({n: (("Z", "X", "Y"), vel * (k + 1)) for k, n in enumerate("UVW")},

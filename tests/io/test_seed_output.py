@@ -222,7 +222,8 @@ def test_netcdf_needs_xarray(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("force_scipy", [False, True])
 def test_netcdf_round_trip(tmp_path, monkeypatch, force_scipy):
-    xr = pytest.importorskip("xarray")
+    import xarray as xr
+
     from lidarjax import _util as _common
 
     if force_scipy:  # as on a machine with xarray but without h5netcdf/h5py

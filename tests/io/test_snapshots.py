@@ -76,7 +76,7 @@ def test_field_files_and_netcdf_with_a_time_axis(tmp_path):
         load_field_sequence(paths, times=times[:2])
     with pytest.raises(ValueError, match="give `times`"):
         load_field_sequence(paths)
-    xr = pytest.importorskip("xarray")
+    import xarray as xr
     vel = np.stack([_flow(pts, t) for t in times])
     ds = xr.Dataset({c: (("time", "x", "y", "z"), vel[..., i]) for i, c in enumerate("uvw")},
                     coords={"time": times, "x": x, "y": y, "z": z})

@@ -6,16 +6,15 @@ vertical one), and a simulated series written and read back."""
 
 from __future__ import annotations
 
+import h5py
 import numpy as np
 import pytest
+import xarray  # noqa: F401  (the test extra brings it)
 
 import lidarjax as lj
 from lidarjax.io import read_scan_netcdf, read_windcube_scan, write_scan_netcdf
 
 from ..helpers import scanning_file
-
-h5py = pytest.importorskip("h5py")
-pytest.importorskip("xarray")
 
 DBS_NAME = "WLS200S-218_2021-07-01_13-03-28_dbs_452_100m_cut.nc"
 

@@ -80,7 +80,7 @@ def _points(n=600):
 
 @pytest.mark.parametrize("combination", fm.COMBINATIONS)
 def test_points_match_floris(combination):
-    pytest.importorskip("floris")
+    import floris  # noqa: F401  (the test extra brings it)
     pts = _points()
     for direction in ((270.0, 253.0) if combination == "sum_of_squares" else (253.0,)):
         farm = lj.scenes.wind_farm(LAYOUT_X, LAYOUT_Y, 90.0, 126.0, ct=0.8, yaw=YAW, speed=8.0,
@@ -97,7 +97,7 @@ def test_points_match_floris(combination):
 def test_inflow_matches_floris_where_same():
     """Full or no overlap: FLORIS's 3x3 rotor grid and the overlap average agree exactly;
     partial overlap: they differ (documented: the grid sees a +-R/2 square only)."""
-    pytest.importorskip("floris")
+    import floris  # noqa: F401  (the test extra brings it)
     x = [0.0, 504.0, 1008.0, 0.0]
     y = [0.0, 0.0, 0.0, 600.0]
     for comb in fm.COMBINATIONS:
@@ -126,9 +126,10 @@ def test_floris_nrel_5mw_curve_as_shipped():
     """FLORIS's own NREL 5 MW turbine (Ct up to 1.13 below cut-in, clipped as FLORIS clips it):
     accepted, and within the documented difference from FLORIS: FLORIS reads the curve at
     its 3x3 rotor grid's cubic-mean speed, lidarjax at the exact disc average."""
-    floris = pytest.importorskip("floris")
-    pytest.importorskip("yaml")
     from pathlib import Path
+
+    import floris
+    import yaml  # noqa: F401  (the test extra brings it)
 
     from lidarjax.io import read_turbine_type
 

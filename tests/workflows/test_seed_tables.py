@@ -92,7 +92,7 @@ def test_peak_memory_does_not_grow_with_runs(tmp_path):
 
 
 def test_dask_cluster_gives_the_identical_table(serial):
-    distributed = pytest.importorskip("distributed")
+    import distributed
     _, table, _ = serial
     # scheduler HTTP server on a free port: 8787 may be held by another test's cluster
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,

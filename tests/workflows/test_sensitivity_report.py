@@ -99,7 +99,7 @@ def test_writer(case):
 
 
 def test_writer_figures(case):
-    pytest.importorskip("matplotlib")
+    import matplotlib  # noqa: F401  (the test extra brings it)
     root, _, _, report = case
     names = [p.name for p in write_sensitivity_report(root / "figs", report)]
     assert names[-2:] == ["budget.png", "sensitivity_profiles.png"]
