@@ -239,6 +239,7 @@ from .zephycube import scalar_correction as scalar_correction
 from .zephycube import vector_correction as vector_correction
 
 __all__ = [
+    "control", "FarmStudyConfig", "LacDesign", "design_lac_scan",
     "io", "plots", "scenes", "direction_difference", "heading", "horizontal_speed", "seed_azimuth",
     "wind_direction", "wrap180", "simulate_rotations", "stack_fields", "stack_mounts",
     "unstack_field", "unstack_mounts", "ExactPoints", "GradedProbe", "beam_points",

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 import lidarjax
+import lidarjax.control
 import lidarjax.design
 import lidarjax.io
 import lidarjax.scanning
@@ -30,8 +31,9 @@ sys.path.insert(0, str(ROOT / "tools" / "docs"))
 
 #: the package and its subpackages with an ``__all__``, and the namespaces lidarjax re-exports
 PACKAGES = {"lidarjax": lidarjax, "lidarjax.io": lidarjax.io, "lidarjax.scenes": lidarjax.scenes,
-            "lidarjax.scanning": lidarjax.scanning, "lidarjax.design": lidarjax.design}
-NAMESPACES = {"io", "plots", "scenes"}
+            "lidarjax.scanning": lidarjax.scanning, "lidarjax.design": lidarjax.design,
+            "lidarjax.control": lidarjax.control}
+NAMESPACES = {"io", "plots", "scenes", "control"}
 
 
 def _exported(module) -> set[str]:

@@ -35,6 +35,7 @@ from .scanning import dual_doppler_variance as dual_doppler_variance
 from .scanning import vad_variance as vad_variance
 
 __all__ = [
+    "TURBINES", "LacDesign", "Turbine", "design_lac_scan", "lac_objective",
     "OBJECTIVES", "Placement", "RegionBox", "RegionPolygon", "design_placement",
     "evaluate_placements", "placement_objective", "placement_problem", "DualDopplerDesign",
     "RegionRing", "VadDesign", "design_dual_doppler", "design_vad", "dual_doppler_variance",
