@@ -11,7 +11,7 @@ Conventions (used everywhere in lidarjax):
   measured clockwise from ``+x``: ``theta_seed = -atan2(v, u) mod 360``; hence
   ``meteorological = (theta_seed + 270) mod 360``. See `seed_azimuth`.
 
-Calm (a horizontal speed whose square underflows: below ``sqrt(finfo.tiny)``, about
+Calm (a horizontal speed whose square underflows: at or below ``sqrt(finfo.tiny)``, about
 1.5e-154 m/s in float64 and 1.1e-19 m/s in float32) has no direction: `wind_direction` gives NaN there, and its
 gradient is zero rather than NaN/inf (the jax-md ``safe_mask`` pattern: mask the input,
 then the output).
@@ -35,7 +35,12 @@ __all__ = [
 ]
 
 def _calm_mask(u, v):
-    """True where the horizontal vector is exactly or numerically zero."""
+    """True where the horizontal vector ``(u, v)`` (m/s) is calm: ``u*u + v*v`` at or below
+    the dtype's smallest normal number ``finfo.tiny`` (zero, or a square that underflows, as
+    the backend computes it: one that flushes subnormals to zero, as XLA's CPU does, adds
+    each component's square after flushing; NaN is not calm). The one definition of calm:
+    `wind_direction` and the other functions here, `lidarjax.simulate`'s `Flag.CALM` and
+    the inversions' `InverseFlag.CALM`."""
     h2 = u * u + v * v
     tiny = jnp.finfo(jnp.result_type(h2)).tiny
     return h2 <= tiny
@@ -84,7 +89,8 @@ def wind_direction(velocity: Float[ArrayLike, "... 3"]) -> Float[Array, ...]:
     vector is expressed in). A southward wind ``(0, -1, 0)`` gives 0, a westward wind
     ``(-1, 0, 0)`` gives 90.
 
-    Calm (zero horizontal speed) gives NaN, with a zero (finite) gradient.
+    Calm (zero horizontal speed or one whose square underflows, module docs; `Flag.CALM` in
+    a simulation) gives NaN, with a zero (finite) gradient.
 
     **Arguments:**
 

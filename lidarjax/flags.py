@@ -28,7 +28,10 @@ class Flag(enum.IntFlag):
     #: The point directly above the lidar is outside the field or in a solid: the point
     #: velocity and the ``cfp_*`` factors are NaN.
     POINT_OUTSIDE = 2
-    #: The reconstructed horizontal wind is exactly zero: its direction is undefined (NaN).
+    #: The reconstructed horizontal wind is calm: zero, or its square at or below the dtype's
+    #: smallest normal number (``finfo.tiny``: speeds to about 1.5e-154 m/s in float64,
+    #: 1.1e-19 m/s in float32). Its direction is undefined: `Simulation.lidar_direction`
+    #: and `lidarjax.wind_direction` give NaN exactly where this flag is set (one definition).
     CALM = 4
     #: The scan's beam matrix is ill-conditioned: condition number above
     #: `lidarjax.scan.ILL_CONDITIONED` = 100, a cone angle below 0.81 degrees (DBS, sine fit;

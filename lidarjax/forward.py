@@ -16,7 +16,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._precision import difference, is_concrete
-from .angles import horizontal_speed, wind_direction
+from .angles import _calm_mask, horizontal_speed, wind_direction
 from .beam import _cut, beam_los, exact_by_default, probe_for_field, profile_geometry
 from .corrections import DEFAULT_RATIO_TOL, correction_factors
 from .field import AbstractField
@@ -292,8 +292,8 @@ def _simulate_traced(field, scan, mount, heights, u_ref, probe, ratio_tol, *, po
         factors[key] = jnp.where(ok, f, jnp.nan)
         if key in ("cff_u", "cff_v", "cff_U", "cfp_u", "cfp_v", "cfp_w", "cfp_U"):
             ratio_nan |= ok & jnp.isnan(f)
-    h2 = lidar_velocity[..., 0] ** 2 + lidar_velocity[..., 1] ** 2
-    flags |= jnp.where(h2 == 0, int(Flag.CALM), 0)
+    calm = _calm_mask(lidar_velocity[..., 0], lidar_velocity[..., 1])  # NaN direction there
+    flags |= jnp.where(calm, int(Flag.CALM), 0)
     cond = scan.condition_number()
     flags |= jnp.where(cond > ILL_CONDITIONED, int(Flag.ILL_CONDITIONED), 0)
     flags |= jnp.where(ratio_nan, int(Flag.RATIO_UNDEFINED), 0)

@@ -51,6 +51,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from ._backend import CPU_BATCH, bucket, default_batch, positive_size
 from ._precision import HIGHEST, default_float, is_concrete
 from ._util import compiled
+from .angles import _calm_mask
 from .flags import InverseFlag
 from .response import (
     AbstractProfile,
@@ -124,7 +125,7 @@ def _polar(y):
     """Speed and meteorological direction (degrees) of ``y = (u, v)``, gradient-safe at 0."""
     u, v = y[0], y[1]
     h2 = u * u + v * v
-    calm = h2 <= jnp.finfo(h2.dtype).tiny
+    calm = _calm_mask(u, v)
     speed = jnp.where(calm, 0.0, jnp.sqrt(jnp.where(calm, 1.0, h2)))
     d = jnp.rad2deg(jnp.arctan2(jnp.where(calm, 0.0, -u), jnp.where(calm, 1.0, -v)))
     return speed, d, calm

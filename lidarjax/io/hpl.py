@@ -293,7 +293,8 @@ def read_hpl(path: PathLike) -> HaloScan:
     truncated file and for rays that are not a whole number of the header's scans.
     """
     p = require_file(path, "Halo .hpl file")
-    lines = read_text(p).splitlines()
+    text = read_text(p)
+    lines = text.splitlines()
     header, end = _read_header(p, lines)
     n_gates = _int_field(p, lines, header, "number of gates")
     gate_length = _float_field(p, lines, header, "range gate length (m)")
@@ -301,10 +302,9 @@ def read_hpl(path: PathLike) -> HaloScan:
     rays_per_scan = _int_field(p, lines, header, per_scan_key) if per_scan_key else None
     start = _start_time(p, lines, header)
     first, spacing = _gate_layout(p, lines[:end], gate_length)
-    # The last-line check runs whether or not the file ends with a newline: before this
-    # function was split, `newline_end` was read from the start-time text (which had taken
-    # the name `text`), never from the file, so it was always False. Kept as it behaved.
-    rays, gates, cut = _read_rays(p, lines, end, n_gates, newline_end=False)
+    # a line end after the last line (blanks may follow it): the line was written whole
+    newline_end = text.rstrip(" \t").endswith(("\n", "\r"))
+    rays, gates, cut = _read_rays(p, lines, end, n_gates, newline_end)
     n = len(rays)
     _warn_incomplete(p, n, rays_per_scan, per_scan_key, cut)
     ray = np.asarray(rays)

@@ -161,6 +161,40 @@ def test_float32_follows_input():
     np.testing.assert_allclose(a.cff_th, b.cff_th, atol=5e-4)
 
 
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+def test_calm_has_one_definition(dtype):
+    """A uniform wind whose horizontal square is at or below ``finfo.tiny`` but nonzero (the
+    speed ``sqrt(tiny)``, exactly 2**-511 or 2**-63, whose square is `tiny` itself, and below
+    it) is `Flag.CALM` exactly where the simulation's and `wind_direction`'s directions are
+    NaN, in every direction; above it, neither. (Gradients there: the `@example` at 2**-511
+    in tests/core/test_stability_forward.py.)"""
+    tiny = np.finfo(dtype).tiny
+    root = float(np.sqrt(tiny))  # a power of two: the cardinal winds reconstruct exactly
+    speeds = np.array([0.0, 1e-3 * root, 0.5 * root, root, 1.01 * root, 1.0])
+    dirs = np.array([0.0, 90.0, 180.0, 270.0, 45.0])
+    scan = lj.windcube_v2(30.0)
+
+    def run(speed, direction):
+        field = lj.scenes.Uniform(jnp.zeros(3, dtype), jnp.zeros(3, dtype), speed, direction,
+                                  jnp.zeros((), dtype))
+        sim = lj.simulate(field, scan, lj.Mount(jnp.zeros(3, dtype)), jnp.array([50.0], dtype))
+        return sim.flags[0], sim.lidar_velocity[0], sim.lidar_direction[0]
+
+    s, d = (jnp.asarray(a, dtype) for a in np.meshgrid(speeds, dirs, indexing="ij"))
+    flags, velocity, direction = jax.jit(jax.vmap(run))(s.ravel(), d.ravel())
+    calm = (np.asarray(flags) & lj.Flag.CALM) != 0
+    assert velocity.dtype == dtype
+    np.testing.assert_array_equal(np.isnan(direction), calm)
+    np.testing.assert_array_equal(np.isnan(lj.wind_direction(velocity)), calm)
+    calm = calm.reshape(speeds.size, dirs.size)
+    # the cardinal winds' squares, in numpy (in the dtype, subnormals kept)
+    h = np.asarray(velocity[:, :2]).reshape(speeds.size, dirs.size, 2)
+    assert np.all(np.sum(h[:4, :4] ** 2, -1) <= tiny) and np.all(np.sum(h[4:] ** 2, -1) > tiny)
+    assert np.all(calm[:4]) and not np.any(calm[5])  # sqrt(tiny) itself included
+    assert np.all(calm[4, :4] == 0)  # 1.01 sqrt(tiny): not calm (45 degrees depends on
+    # whether the backend flushes subnormal component squares: the flag and NaN agree either way)
+
+
 SCENE = lj.scenes.hemisphere(20.0, 10.0, 260.0)
 U_REF = 10.0 * np.asarray(lj.heading(260.0))
 

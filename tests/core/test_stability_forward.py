@@ -72,6 +72,10 @@ angles = st.floats(-360.0, 360.0)
          heights=[0.05, 1.0, 300.0], loc=(0.0, 0.0, 0.0))
 @example(speed=10.0, direction=360.0, cone=5.0, beta=90.0, gamma=0.0, psi=180.0, eps=0.0,
          alpha=0.0, heights=[0.03, 40.0, 300.0], loc=(0.0, 0.0, 0.0))
+# a free stream of sqrt(tiny) = 2**-511 m/s: the lidar's squares about tiny, calm, finite
+# gradients (the flag at tiny itself: tests/core/test_forward.py::test_calm_has_one_definition)
+@example(speed=2.0**-511, direction=0.0, cone=30.0, beta=0.0, gamma=0.0, psi=0.0, eps=0.0,
+         alpha=0.0, heights=[1.0, 40.0, 300.0], loc=(0.0, 0.0, 0.0))
 def test_outputs_finite_or_flagged_and_gradients_finite(
         speed, direction, cone, beta, gamma, psi, eps, alpha, heights, loc):
     p = jnp.asarray([speed, direction, cone, beta, gamma, psi, eps, alpha, *heights, *loc])
@@ -87,6 +91,7 @@ def test_outputs_finite_or_flagged_and_gradients_finite(
         assert not np.any(np.isinf(v)), name
         assert np.all(np.isfinite(v[~explained])), (name, v, flags)
         assert np.all(np.abs(v[np.isfinite(v)]) <= 1.0e4 + 180.0), name
+    assert_calm_where_no_direction(sim)
     if speed**2 <= np.finfo(np.float64).tiny:  # calm, sqrt(tiny) ~ 1.5e-154 m/s included
         assert np.all(flags & lj.Flag.CALM)
         assert np.all(np.isnan(sim.cff_w))  # normalised by a zero free-stream speed
@@ -107,8 +112,18 @@ def masked_total(sim):
     return total + jnp.sum(lj.horizontal_speed(jnp.nan_to_num(sim.lidar_velocity)))
 
 
+def assert_calm_where_no_direction(sim):
+    """`Flag.CALM` is set exactly where the lidar's direction is NaN from a finite vector
+    (one definition; a NaN vector is `BEAM_OUTSIDE`)."""
+    finite = np.all(np.isfinite(sim.lidar_velocity), axis=-1)
+    np.testing.assert_array_equal(np.isnan(lj.wind_direction(sim.lidar_velocity)) & finite,
+                                  (np.asarray(sim.flags) & lj.Flag.CALM) != 0)
+
+
 def assert_finite_or_explained(sim, speed):
-    """Every output is finite, or NaN with a flag that explains it (never inf)."""
+    """Every output is finite, or NaN with a flag that explains it (never inf); CALM exactly
+    where the direction is NaN."""
+    assert_calm_where_no_direction(sim)
     flags = np.asarray(sim.flags)
     beam = (flags & (lj.Flag.BEAM_OUTSIDE)) != 0
     point = (flags & lj.Flag.POINT_OUTSIDE) != 0
@@ -192,6 +207,9 @@ model_scale = value_and_gradient(_model_scale)
 # found by hypothesis: a free stream of 3e-19 m/s (its square still a normal float32) gave
 # inf gradients of the direction addends and cfp_w (the reverse pass squared 1 / speed)
 @example(speed=2.7833376140953104e-19, direction=0.0, cone=5.0, beta=0.0, gamma=0.0, psi=0.0,
+         eps=0.0, heights=[1.0, 1.0, 1.0], rho=0.0, theta=0.0, clearance=0.03125, scale=1.0)
+# float32's sqrt(tiny) = 2**-63 m/s: squares about tiny, the calm boundary
+@example(speed=2.0**-63, direction=0.0, cone=5.0, beta=0.0, gamma=0.0, psi=0.0,
          eps=0.0, heights=[1.0, 1.0, 1.0], rho=0.0, theta=0.0, clearance=0.03125, scale=1.0)
 def test_model_scale_platform_float32(speed, direction, cone, beta, gamma, psi, eps, heights,
                                       rho, theta, clearance, scale):

@@ -331,6 +331,27 @@ def test_truncated_files_keep_their_complete_rays(tmp_path, edit, end, line, wha
         read_hpl(cut)
 
 
+@pytest.mark.parametrize("end", ["\n", "\r\n", "\r", "\n  "])
+def test_a_final_line_end_keeps_a_last_line_of_fewer_decimals(tmp_path, end):
+    """The RHI's last line with its beta written to 5 decimals (the line before has 6):
+    ended by a line end it was written whole and all 4 rays are kept, value for value; the
+    same line without a final line end may be cut mid-number, and its ray is dropped."""
+    last = " 19 0.8026 1.101089  5.70896E-6"
+
+    def edit(ls):
+        return ls[:-1] + [last]
+
+    full = read_hpl(RHI)
+    s = _read(_corrupt(tmp_path, RHI, edit, end))
+    assert s.n_rays == 4
+    np.testing.assert_array_equal(s.doppler, full.doppler)
+    np.testing.assert_array_equal(s.beta[:, :-1], full.beta[:, :-1])
+    np.testing.assert_array_equal(s.beta[:3], full.beta[:3])
+    assert s.beta[3, 19] == 5.70896e-6
+    s = _read(_corrupt(tmp_path, RHI, edit, ""), "line 101: truncated file")
+    assert s.n_rays == 3
+
+
 def test_whole_files_without_final_newline_and_wrong_counts(tmp_path):
     """No final newline on a complete file: no warning. A header count that the rays held do
     not fill: one warning, every ray kept."""
