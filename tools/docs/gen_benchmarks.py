@@ -108,6 +108,17 @@ BENCHMARKS = [
     ("farm", "Wind farms",
      "100 turbines x 360 directions at a V2's pulsed beam points, forward and gradient",
      "FLORIS 4.7", "wind-farms.md"),
+    ("lac", "Lidar-assisted control",
+     "Task 52's lidar-rotor spectra and filter cut-offs reproduced at all 1024 frequencies; the "
+     "analytic coherence at 500 frequencies for a 709-point rotor and an 88-node lidar after "
+     "compilation; a scan design by gradients against a dense grid search, and Fu et al.'s "
+     "spinner case", "IEA Wind Task 52's published analytic spectra and FFP inputs, a numpy "
+     "implementation of the same sums, a 30 x 30 grid search", "lidar-assisted-control.md"),
+    ("mount", "Mount construction",
+     "`Mount(locations, beta=betas)` for 10,000 platform rotations from numpy arrays, JAX "
+     "arrays, lists and tuples, medians of 31 alternating calls",
+     "the same constructor at commit 1d75568 (before the tracer-in-a-tuple fix) and at df8d71b, "
+     "loaded with `git show` into the same process", "conventions.md"),
     ("stability", "Numerical stability",
      "random scenes (speeds 0-60 m/s, cones 5-60 degrees, UTM offsets, float32 and float64): "
      "finite-or-flagged outputs and finite gradients; conditioning; bad records",
