@@ -40,6 +40,6 @@ from .synthesis import welch_coherence as welch_coherence
 __all__ = [
     "HALF_POWER", "IEC_REFERENCE_INTENSITY", "KaimalInflow", "LacSpectra", "LidarSamples", "RotorDisc",
     "buffer_time", "coherence_band", "coherence_bandwidth", "cone_points", "filter_cutoff", "filter_delay",
-    "iec_turbulence_intensity", "kaimal_rews_series", "lac_spectra", "lidar_rews", "lidar_samples", "rotor_disc", "rotor_rews",
-    "rotor_to_cfd", "welch_coherence",
+    "iec_turbulence_intensity", "kaimal_rews_series", "lac_spectra", "lidar_rews", "lidar_samples",
+    "rotor_disc", "rotor_rews", "rotor_to_cfd", "welch_coherence",
 ]
