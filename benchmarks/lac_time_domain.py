@@ -87,9 +87,10 @@ def main():
              "| max abs diff | simulation (s) |", "|---|---|---|---|---|---|---|---|"]
     for name, rs in results["cases"].items():
         for r in rs:
-            lines.append(f"| {name} | {r['duration_s'] / 3600:.0f} h | {r['segments']} | {r['bandwidth_hz']:.4f} "
-                         f"| {r['bins_in_pointwise_95']}/{r['bins_to_bandwidth']} | {r['all_in_simultaneous_95']} "
-                         f"| {r['max_abs_difference']:.3f} | {r['simulation_s']:.1f} |")
+            lines.append(f"| {name} | {r['duration_s'] / 3600:.0f} h | {r['segments']} "
+                         f"| {r['bandwidth_hz']:.4f} | {r['bins_in_pointwise_95']}/{r['bins_to_bandwidth']} "
+                         f"| {r['all_in_simultaneous_95']} | {r['max_abs_difference']:.3f} "
+                         f"| {r['simulation_s']:.1f} |")
     (OUT / "lac_time_domain.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     plot(results)

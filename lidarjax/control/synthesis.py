@@ -26,6 +26,11 @@ import contextlib
 import numpy as np
 from scipy import signal, stats
 
+try:  # optional: scipy usually brings it
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover
+    threadpool_limits = None
+
 from .geometry import LidarSamples, RotorDisc
 from .inflow import KaimalInflow
 
@@ -35,11 +40,7 @@ __all__ = ["coherence_band", "kaimal_rews_series", "welch_coherence"]
 def _one_blas_thread():
     """Many small Cholesky factorisations run ten times faster on one BLAS thread than on a
     shared machine's oversubscribed pool (threadpoolctl, when installed)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        return contextlib.nullcontext()
-    return threadpool_limits(1)
+    return contextlib.nullcontext() if threadpool_limits is None else threadpool_limits(1)
 
 
 def _plane_coefficients(yz, freq, s_u, rate, rng, chunk=128):
