@@ -9,6 +9,8 @@ spectra and coherence, and the feed-forward filter they design (Task 52's model)
   ``|G_RL|``), `coherence_bandwidth`, `filter_cutoff`, `filter_delay`, `buffer_time`.
 - `rews`: `rotor_rews` (the REWS of any field), `lidar_rews` (the lidar's estimate, Task 52's
   processing), `rotor_to_cfd`.
+- `synthesis`: `kaimal_rews_series` (both simulated in Kaimal/IEC turbulence, Veers' method),
+  `welch_coherence`, `coherence_band` (the time-domain check of the analytic coherence).
 
 See ``docs/lidar-assisted-control.md``.
 """
@@ -31,10 +33,13 @@ from .spectra import coherence_bandwidth as coherence_bandwidth
 from .spectra import filter_cutoff as filter_cutoff
 from .spectra import filter_delay as filter_delay
 from .spectra import lac_spectra as lac_spectra
+from .synthesis import coherence_band as coherence_band
+from .synthesis import kaimal_rews_series as kaimal_rews_series
+from .synthesis import welch_coherence as welch_coherence
 
 __all__ = [
     "HALF_POWER", "IEC_REFERENCE_INTENSITY", "KaimalInflow", "LacSpectra", "LidarSamples", "RotorDisc",
-    "buffer_time", "coherence_bandwidth", "cone_points", "filter_cutoff", "filter_delay",
-    "iec_turbulence_intensity", "lac_spectra", "lidar_rews", "lidar_samples", "rotor_disc", "rotor_rews",
-    "rotor_to_cfd",
+    "buffer_time", "coherence_band", "coherence_bandwidth", "cone_points", "filter_cutoff", "filter_delay",
+    "iec_turbulence_intensity", "kaimal_rews_series", "lac_spectra", "lidar_rews", "lidar_samples",
+    "rotor_disc", "rotor_rews", "rotor_to_cfd", "welch_coherence",
 ]

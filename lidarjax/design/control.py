@@ -90,7 +90,8 @@ def _exact_bandwidth(pb, samples, f_grid):
         g, dg = jax.jvp(excess, (f,), (jnp.ones_like(f),))
         return f - g / jax.lax.stop_gradient(dg)
 
-    f = jax.lax.stop_gradient(newton(newton(jax.lax.stop_gradient(f_grid))))
+    # two steps in one loop body (one copy of the spectra's graph to compile, not two)
+    f = jax.lax.stop_gradient(jax.lax.fori_loop(0, 2, lambda _, f: newton(f), jax.lax.stop_gradient(f_grid)))
     return newton(f)
 
 

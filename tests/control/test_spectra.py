@@ -13,6 +13,7 @@ import scipy.io
 from scipy import integrate
 
 from lidarjax import control as lc
+from lidarjax.control import spectra as spectra_module
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "lac"
 FFP_CUTOFF = {"4BeamPulsed": 0.1232, "CircularCW": 0.3268}  # FFP_v1_*.IN, rad/s
@@ -26,6 +27,10 @@ def _ffp(name, key):
     raise KeyError(key)
 
 
+N_NODES = 440  # the CW file's nodes (40 scan points x 11 offsets); the 4-beam file's 44 are padded to it
+N_CLASSES = 72  # symmetry classes, padded likewise: one compiled program serves both files
+
+
 def _load(name):
     m = scipy.io.loadmat(DATA / f"LidarRotorSpectra_IEA15MW_{name}.mat", squeeze_me=True,
                          struct_as_record=False)
@@ -37,15 +42,36 @@ def _load(name):
     return m, samples, rotor, inflow, focus
 
 
+def _padded(samples, rotor):
+    """`samples` padded to `N_NODES` nodes with zero-weight copies of its first node, and its
+    symmetry classes (`lac_spectra`'s) padded to `N_CLASSES` with copies of the first
+    representative: exactly the same sums, one shape for both files."""
+    n = samples.points.shape[0]
+
+    def pad(a):
+        return jnp.concatenate([a, jnp.repeat(a[:1], N_NODES - n, axis=0)])
+
+    padded = lc.LidarSamples(points=pad(samples.points), directions=pad(samples.directions),
+                             weights=jnp.concatenate([samples.weights, jnp.zeros(N_NODES - n)]),
+                             delays=pad(samples.delays))
+    rep, inverse = spectra_module._symmetry_classes(samples, rotor)
+    assert rep.size <= N_CLASSES
+    rep = jnp.concatenate([rep, jnp.repeat(rep[:1], N_CLASSES - rep.size)])
+    return padded, (rep, jnp.concatenate([inverse, jnp.zeros(N_NODES - n, inverse.dtype)]))
+
+
+# every frequency to 0.07 Hz (cut-offs, bandwidths), then every 32nd (all 1024 of both files are
+# checked in benchmarks/lac.py)
+IDX = np.concatenate([np.arange(72), np.arange(72, 1024, 32)])
+
+
 @pytest.fixture(scope="module", params=["4BeamPulsed", "CircularCW"])
 def task52(request):
     name = request.param
     m, samples, rotor, inflow, focus = _load(name)
-    idx = np.arange(m["f"].size)
-    if name == "CircularCW":  # 440 nodes: every frequency to 0.07 Hz (cut-off, bandwidth), then every 32nd
-        idx = np.concatenate([idx[:72], idx[72::32]])  # (all 1024 are checked in benchmarks/lac.py)
-    spectra = lc.lac_spectra(samples, rotor, inflow, m["f"][idx])
-    return name, m, idx, spectra, focus
+    padded, classes = _padded(samples, rotor)
+    spectra = spectra_module._spectra(padded, rotor, inflow, jnp.asarray(m["f"][IDX]), classes)
+    return name, m, IDX, spectra, focus
 
 
 def test_rotor_grid_is_task52s():
@@ -59,6 +85,16 @@ def test_spectra_match_task52(task52):
     np.testing.assert_allclose(spectra.S_RR, m["S_RR"][idx], rtol=1e-10)
     np.testing.assert_allclose(spectra.S_LL, m["S_LL"][idx], rtol=1e-10)
     np.testing.assert_allclose(np.abs(spectra.S_RL), np.abs(m["S_RL"][idx]), rtol=1e-10)
+    # S_RR is S_u times the double sum of the disc's coherences (brute force over 709^2 pairs)
+    rotor = lc.rotor_disc(120.0, spacing=8.0)
+    yz = np.asarray(rotor.points)
+    r = np.hypot(*(yz[:, None, :] - yz[None]).transpose(2, 0, 1))
+    sigma, scale = float(m["Parameter"].TurbSim.IECturbc) * 18.0, 8.1 * 42.0  # IEC Kaimal, U = 18 m/s
+    for i in (0, 30, 80):
+        f = m["f"][idx[i]]
+        rate = 12 * np.sqrt((f / 18.0) ** 2 + (0.12 / scale) ** 2)
+        s_u = 4 * sigma**2 * scale / 18.0 / (1 + 6 * f * scale / 18.0) ** (5 / 3)
+        assert spectra.S_RR[i] == pytest.approx(s_u * np.mean(np.exp(-rate * r)), rel=1e-10)
     # the phase: the rotor lags the lidar by about x/U (Task 52's file lags it by half a scan less)
     lag = -np.unwrap(np.angle(spectra.S_RL[:20])) / (2 * np.pi * spectra.frequency[:20])
     assert np.all(np.abs(lag - m["Trajectory"].x_L_AllDistances.flat[0] / 18.0) < 0.2)
@@ -96,7 +132,9 @@ def test_bandwidth_is_the_half_coherence_crossing(task52):
 
 def test_disc_limit():
     """S_RR of the grid approaches the continuous disc's, ``S_u int p(r) coh(r) dr`` with ``p``
-    the distance density of two random points in a disc, as the grid is refined."""
+    the distance density of two random points in a disc, as the grid is refined (the spectra
+    sum the same folded pairs: `test_spectra_match_task52` checks them against the brute-force
+    double sum)."""
     radius, inflow = 63.0, lc.KaimalInflow(11.4, 0.18)
     f = np.array([0.005, 0.02, 0.05, 0.1, 0.3])
 
@@ -107,15 +145,11 @@ def test_disc_limit():
     rate = np.asarray(inflow.decay_rate(f))
     exact = np.array([integrate.quad(lambda r, s=s: density(r) * np.exp(-s * r), 0, 2 * radius,
                                      epsabs=1e-13, limit=200)[0] for s in rate])
-    s_u = np.asarray(inflow.spectra(f)[0])
     errors = []
     for spacing in (12.0, 6.0, 3.0):
         rotor = lc.rotor_disc(radius, spacing=spacing)
         folded = np.exp(-rate[:, None] * np.asarray(rotor.pair_distance)) @ np.asarray(rotor.pair_weight)
         errors.append(np.abs(folded / exact - 1))
-        if spacing == 12.0:  # the spectra sum the same folded pairs
-            samples = lc.lidar_samples(np.array([[100.0, 0.0, 0.0], [100.0, 0.0, 1.0]]))
-            np.testing.assert_allclose(lc.lac_spectra(samples, rotor, inflow, f).S_RR, s_u * folded, rtol=1e-12)
     worst = [e.max() for e in errors]
     assert worst[0] > worst[1] > worst[2]
     assert worst[2] < 0.05 and errors[2][f <= 0.1].max() < 0.01
@@ -144,11 +178,13 @@ def test_gradients_match_central_differences(small):
         return jnp.stack([lc.coherence_bandwidth(sp)[0], jnp.sum(sp.S_LL[::8]), jnp.sum(jnp.abs(sp.S_RL[::8]))])
 
     x = np.array([90.0, 18.0, 12.0, 0.25])
-    value, jac = jax.jit(outputs), jax.jit(jax.jacrev(outputs))
     eps = 1e-4
-    fd = np.stack([(np.asarray(value(x + eps * e)) - np.asarray(value(x - eps * e))) / (2 * eps)
-                   for e in np.eye(4)], axis=1)
-    got = np.asarray(jac(x))
+    # one compiled program, one call: the Jacobian at x and the values at x +- eps e_i
+    points = np.concatenate([x[None], x + eps * np.eye(4), x - eps * np.eye(4)])
+    values, jacs = jax.jit(jax.vmap(lambda y: (outputs(y), jax.jacrev(outputs)(y))))(points)
+    values = np.asarray(values)
+    fd = ((values[1:5] - values[5:]) / (2 * eps)).T
+    got = np.asarray(jacs[0])
     assert np.all(np.isfinite(got)) and np.all(np.abs(got[0, :3]) > 0)
     np.testing.assert_allclose(got, fd, rtol=1e-4, atol=1e-9)
 
@@ -164,8 +200,11 @@ def test_probe_weighting_matches_its_nodes(small):
     o, w = probe.nodes(jnp.linalg.norm(focus[0]))
     tabulated = lc.lac_spectra(lc.lidar_samples(focus, offsets=o, offset_weights=w), rotor, inflow, f)
     np.testing.assert_allclose(with_probe.S_LL, tabulated.S_LL, rtol=1e-12)
-    # a range-weighted beam averages more turbulence out than a point: less lidar variance
-    point = lc.lac_spectra(lc.lidar_samples(focus, offsets=np.zeros(7)), rotor, inflow, f)  # same shapes
+    # a range-weighted beam averages more turbulence out than a point: less lidar variance (the
+    # same sums without the symmetry folding, which has another shape for coincident nodes)
+    point = spectra_module._spectra(lc.lidar_samples(focus, offsets=np.zeros(7)), rotor, inflow, f)
+    np.testing.assert_allclose(spectra_module._spectra(lc.lidar_samples(focus, probe=probe), rotor, inflow,
+                                                       f).S_LL, with_probe.S_LL, rtol=1e-12)
     assert np.all(np.asarray(with_probe.S_LL) < np.asarray(point.S_LL))
 
 
@@ -179,5 +218,6 @@ def test_bad_input_is_refused():
     with pytest.raises(ValueError, match="frequency"):
         lc.lac_spectra(lc.lidar_samples(np.ones((1, 3))), lc.rotor_disc(10.0, spacing=5.0),
                        lc.KaimalInflow(10.0, 0.1), np.array([-1.0, 1.0]))
+    n = IDX.size  # the shape the Task 52 tests compiled coherence_bandwidth for
     assert jax.numpy.isnan(lc.coherence_bandwidth(lc.LacSpectra(
-        jnp.array([1.0, 2.0]), jnp.ones(2), jnp.ones(2), jnp.ones(2) * 0.1 + 0j, jnp.asarray(10.0)))[0])
+        jnp.linspace(1.0, 2.0, n), jnp.ones(n), jnp.ones(n), jnp.ones(n) * 0.1 + 0j, jnp.asarray(10.0)))[0])
