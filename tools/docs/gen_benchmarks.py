@@ -114,6 +114,12 @@ BENCHMARKS = [
      "compilation; a scan design by gradients against a dense grid search, and Fu et al.'s "
      "spinner case", "IEA Wind Task 52's published analytic spectra and FFP inputs, a numpy "
      "implementation of the same sums, a 30 x 30 grid search", "lidar-assisted-control.md"),
+    ("lac_time_domain", "Lidar-assisted control in the time domain",
+     "REWS and its lidar estimate simulated over 1 and 6 hours through a Kaimal/IEC-coherence "
+     "field (Veers' method with frozen-turbulence leads), Welch coherence against the analytic "
+     "model in every bin up to the coherence bandwidth",
+     "`lidarjax.control.lac_spectra`, the analytic model the Task 52 comparison validates",
+     "lidar-assisted-control.md"),
     ("mount", "Mount construction",
      "`Mount(locations, beta=betas)` for 10,000 platform rotations from numpy arrays, JAX "
      "arrays, lists and tuples, medians of 31 alternating calls",
