@@ -14,6 +14,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from _page import write_or_check
+
 ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "cli.md"
 
@@ -98,11 +100,7 @@ def render() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    text = render()
-    if argv and argv[0] == "--check":
-        return 0 if PAGE.exists() and PAGE.read_text() == text else 1
-    PAGE.write_text(text)
-    return 0
+    return write_or_check(PAGE, render, argv)
 
 
 if __name__ == "__main__":
