@@ -9,7 +9,9 @@ import sys
 # once. XLA compiles them faster with LLVM at -O0 and, where the jaxlib still has it (0.10;
 # gone by 0.12), the legacy LLVM emitter instead of the MLIR fusion emitters: the simulate
 # program compiles in 0.6 s instead of 1.7 s (jax 0.10) or 1.2 s instead of 1.5 s (jax 0.12),
-# and the whole suite on 2 cores took 410 s instead of 830 s (jax 0.10). The code computes
+# and the whole suite on 2 cores took 410 s instead of 830 s (jax 0.10); LLVM without its
+# expensive passes (what `jax_disable_most_optimizations` also sets) takes 13 % off the CPU time
+# of tests/core/test_forward.py (41.5 s -> 37.1 s, jax 0.10). The code computes
 # the same IEEE operations; only roundings of fused a*b+c and the order of sums may differ,
 # which the library must survive anyway (GPUs and fast-math compilers differ more:
 # tests/core/test_fused_arithmetic.py runs those for real).
@@ -18,7 +20,9 @@ import sys
 # any backend starts, so every xdist worker inherits it. LIDARJAX_TEST_XLA=default keeps
 # XLA's defaults (CI's Python 3.13 leg runs so: both code generators are tested).
 FAST_CPU_XLA_FLAGS = (
-    "--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=0",
+    "--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=0"
+    " --xla_llvm_disable_expensive_passes=true",
+    "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true",
     "--xla_backend_optimization_level=0",
 )
 
