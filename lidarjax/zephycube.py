@@ -74,15 +74,18 @@ class ZephyCubeWind(eqx.Module):
         return jnp.stack([-self.speed * jnp.sin(d), -self.speed * jnp.cos(d)], axis=-1)
 
 
+def _require(table: ResponseTable, name: str, caller: str, build: str, what: str | None = None) -> None:
+    """Raise `ValueError` naming `caller` and how to `build` a table with `name` when the
+    table has none."""
+    if getattr(table, name) is None:
+        raise ValueError(f"{caller}: the table has no {what or f'`{name}`'}; build it with {build}.")
+
+
 def beam_layout(table: ResponseTable) -> tuple[float, float, bool]:
     """``(offset, cone, vertical)`` of a Windcube table: azimuth of beam 0 (degrees clockwise
     from north), cone angle of the tilted beams (degrees from the vertical), and whether a
     fifth, vertical beam follows. Raises `ValueError` for other beam patterns."""
-    if table.beam_vectors is None:
-        raise ValueError(
-            "zephycube: the table has no `beam_vectors`; build it with "
-            "ResponseTable.from_simulations(sims, mount=mount)."
-        )
+    _require(table, "beam_vectors", "zephycube", "ResponseTable.from_simulations(sims, mount=mount)")
     n = np.asarray(table.beam_vectors, np.float64)
     if n.shape[0] not in (4, 5):
         raise ValueError(
@@ -185,11 +188,8 @@ def scalar_correction(
     **Returns:** the corrected `ZephyCubeWind` on the vertical above the lidar.
     """
     offset, cone, _ = beam_layout(table)
-    if table.beam_velocity is None:
-        raise ValueError(
-            "scalar_correction: the table has no `beam_velocity`; build it with "
-            "ResponseTable.from_simulations(sims, mount=mount, fields=fields)."
-        )
+    _require(table, "beam_velocity", "scalar_correction",
+             "ResponseTable.from_simulations(sims, mount=mount, fields=fields)")
     speed = _float(speed, table.dtype)
     dtype = speed.dtype
     direction = _float(direction, dtype)
@@ -259,11 +259,8 @@ def vector_correction(
     **Returns:** the corrected `ZephyCubeWind` on the vertical above the lidar.
     """
     offset, cone, _ = beam_layout(table)
-    if table.point is None:
-        raise ValueError(
-            "vector_correction: the table has no `point` (centre-line) velocity; build it "
-            "from Simulations made with point_reference=True."
-        )
+    _require(table, "point", "vector_correction", "Simulations made with point_reference=True",
+             what="`point` (centre-line) velocity")
     los = _float(los, table.dtype)
     _check_los("vector_correction", table, los)
     if alpha is None:

@@ -272,15 +272,20 @@ class MonitorPointField(IndexedPoints, AbstractField):
         return jnp.where(ok[..., None], jnp.where(ok[..., None], v, 0), jnp.nan)
 
 
+def _require_names(names, available, what: str, fix: str) -> None:
+    """Raise `ValueError` (``N <what>, e.g. <names>; <fix>``) when some `names` are not in
+    `available`."""
+    missing = [n for n in names if n not in available]
+    if missing:
+        raise ValueError(f"simulate_from_monitor_points: {len(missing)} {what}, e.g. "
+                         f"{', '.join(missing[:4])}; {fix}")
+
+
 def _aligned_values(locations: MonitorPoints, values) -> np.ndarray:
     """``(n, 3)`` values in the row order of `locations` from an array or a name mapping."""
     if isinstance(values, Mapping):
-        missing = [n for n in locations.names if n not in values]
-        if missing:
-            raise ValueError(
-                f"simulate_from_monitor_points: {len(missing)} of {len(locations)} probes have no "
-                f"sampled value, e.g. {', '.join(missing[:4])}; were the probes written for "
-                "this scan, probe, heights and mounts?")
+        _require_names(locations.names, values, f"of {len(locations)} probes have no sampled value",
+                       "were the probes written for this scan, probe, heights and mounts?")
         return np.array([np.asarray(values[n], np.float64).reshape(3) for n in locations.names])
     arr = np.asarray(values)
     if arr.shape != (len(locations), 3):
@@ -336,12 +341,8 @@ def simulate_from_monitor_points(
     expected = monitor_points(scan, mounts, heights, probes, point_reference=point_reference,
                                labels=labels)
     index = {n: i for i, n in enumerate(locations.names)}
-    missing = [n for n in expected.names if n not in index]
-    if missing:
-        raise ValueError(
-            f"simulate_from_monitor_points: {len(missing)} point(s) this configuration samples are not "
-            f"among the probes, e.g. {', '.join(missing[:4])}; write the probes with the same "
-            "scan, probe, heights and mounts")
+    _require_names(expected.names, index, "point(s) this configuration samples are not among the probes",
+                   "write the probes with the same scan, probe, heights and mounts")
     rows = np.array([index[n] for n in expected.names])
     gap = np.linalg.norm(locations.points[rows] - expected.points, axis=1)
     scale = np.maximum(1.0, np.linalg.norm(expected.points - expected.points.mean(0), axis=1))
