@@ -430,17 +430,25 @@ def _time_flags(t, span):
     return jnp.where(outside, int(Flag.TIME_OUTSIDE), 0).astype(jnp.int32)
 
 
+def _reconstruction_windows(x, t_los, order, sliding: bool, rot: int):
+    """The windows the instrument reconstructs from, of any per-LOS quantity `x` ``(m, h, b)``
+    (LOS, or anything computed per LOS) taken at `t_los`: `sliding` (``update="each_los"``),
+    the latest LOS of every beam after each new LOS (`_sliding_windows`); else one window per
+    `rot` consecutive rows (a height visit: `rot` rotations, or one cycle), `x` averaged over
+    them. Returns ``(n, h, b)`` windows and their times ``(n, h)`` (the latest LOS)."""
+    if sliding:
+        return _sliding_windows(x, t_los, order)
+    m, h, b = x.shape
+    return (jnp.mean(x.reshape(m // rot, rot, h, b), axis=1),
+            jnp.max(t_los.reshape(m // rot, rot, h, b), axis=(1, 3)))
+
+
 def _series_assemble(scan, mount_d, heights, t_los, los, t_pt, v_pt, schedule, motion, start,
                      span, *, order, duration):
     """The reconstructions (as the instrument builds them) and flags of a series."""
     dtype = los.dtype
-    m, h, b = los.shape
-    if schedule.update == "each_los":
-        los_w, t_rec = _sliding_windows(los, t_los, order)
-    else:
-        rot = schedule.rotations_per_height if schedule.heights_sequential else 1
-        los_w = jnp.mean(los.reshape(m // rot, rot, h, b), axis=1)
-        t_rec = jnp.max(t_los.reshape(m // rot, rot, h, b), axis=(1, 3))
+    rot = schedule.rotations_per_height if schedule.heights_sequential else 1
+    los_w, t_rec = _reconstruction_windows(los, t_los, order, schedule.update == "each_los", rot)
     ok = jnp.all(jnp.isfinite(los_w), axis=-1)
     v_lidar = reconstruct(scan, jnp.where(jnp.isfinite(los_w), los_w, 0))
     if motion is None:

@@ -9,12 +9,16 @@ spectra and coherence, and the feed-forward filter they design (Task 52's model)
   ``|G_RL|``), `coherence_bandwidth`, `filter_cutoff`, `filter_delay`, `buffer_time`.
 - `rews`: `rotor_rews` (the REWS of any field), `lidar_rews` (the lidar's estimate, Task 52's
   processing), `rotor_to_cfd`.
+- `estimate`: `series_rews` -> `RewsSeries` (the estimate from `lidarjax.simulate_series`'
+  LOS of a nacelle or spinner lidar, at the times it previews, and the rotor's REWS there).
 - `synthesis`: `kaimal_rews_series` (both simulated in Kaimal/IEC turbulence, Veers' method),
   `welch_coherence`, `coherence_band` (the time-domain check of the analytic coherence).
 
 See ``docs/lidar-assisted-control.md``.
 """
 
+from .estimate import RewsSeries as RewsSeries
+from .estimate import series_rews as series_rews
 from .geometry import LidarSamples as LidarSamples
 from .geometry import RotorDisc as RotorDisc
 from .geometry import cone_points as cone_points
@@ -38,8 +42,9 @@ from .synthesis import kaimal_rews_series as kaimal_rews_series
 from .synthesis import welch_coherence as welch_coherence
 
 __all__ = [
-    "HALF_POWER", "IEC_REFERENCE_INTENSITY", "KaimalInflow", "LacSpectra", "LidarSamples", "RotorDisc",
+    "HALF_POWER", "IEC_REFERENCE_INTENSITY", "KaimalInflow", "LacSpectra", "LidarSamples", "RewsSeries",
+    "RotorDisc",
     "buffer_time", "coherence_band", "coherence_bandwidth", "cone_points", "filter_cutoff", "filter_delay",
     "iec_turbulence_intensity", "kaimal_rews_series", "lac_spectra", "lidar_rews", "lidar_samples",
-    "rotor_disc", "rotor_rews", "rotor_to_cfd", "welch_coherence",
+    "rotor_disc", "rotor_rews", "rotor_to_cfd", "series_rews", "welch_coherence",
 ]

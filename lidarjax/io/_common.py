@@ -72,6 +72,50 @@ def parse_row(
     return out
 
 
+_PLAIN_NUMBER = re.compile(r"^[-+]?(\d+([.,]\d*)?|[.,]\d+)([eE][-+]?(\d+))?$")
+
+
+def ends_with_line_end(text: str) -> bool:
+    """Whether `text` ends with a line end (spaces or tabs may follow it): its last line was
+    written whole."""
+    return text.rstrip(" \t").endswith(("\n", "\r"))
+
+
+def number_format(field: str) -> tuple[int, int] | None:
+    """``(decimals, exponent digits)`` of a number written as `field` (decimal mark ``.`` or
+    ``,``), or None for any other text (``NaN`` included)."""
+    m = _PLAIN_NUMBER.match(field.strip())
+    if m is None:
+        return None
+    mantissa = re.split(r"[eE]", field.strip())[0]
+    decimals = len(re.split(r"[.,]", mantissa)[-1]) if re.search(r"[.,]", mantissa) else 0
+    return decimals, len(m.group(4) or "")
+
+
+def field_cut(last: str, above: Sequence[str], missing: Callable[[str], bool] = lambda f: False) -> str | None:
+    """Why `last`, the last field of a file's last line written without a line end, was cut
+    while the file was written, or None: fixed formats write a column's numbers with the same
+    decimals (and exponent digits), so a number in another format than the same column's
+    numbers `above` (on rows before), or a text that is not a number where they are numbers
+    or a beginning of one of their texts (``Na`` of ``NaN``), is cut. A column without
+    numbers above, or a `missing` code (9999), is taken as written; a cut that keeps the
+    format (an integer column, ``100`` cut to ``10``) cannot be told."""
+    seen = {number_format(f) for f in above if f.strip() and not missing(f)}
+    formats = seen - {None}
+    fmt = number_format(last)
+    if fmt is not None:
+        if not formats or fmt in formats or missing(last):
+            return None
+        return (f"its last field {last.strip()!r} has {fmt[0]} decimals where the column has "
+                f"{'/'.join(str(d) for d, _ in sorted(formats))}")
+    texts = {f.strip() for f in above}
+    if last.strip() in texts:
+        return None
+    if formats or any(t.startswith(last.strip()) for t in texts):
+        return f"its last field {last.strip()!r} is not the column's number"
+    return None
+
+
 def parse_timestamp(text: str, formats: Sequence[str]) -> _dt.datetime:
     """Parse `text` with the first matching `strptime` format; `ValueError` if none does."""
     t = text.strip()

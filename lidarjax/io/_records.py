@@ -14,6 +14,7 @@ import numpy as np
 
 from .._util import summarise_lines
 from ..flags import RecordFlag
+from ._common import field_cut
 
 __all__: list[str] = []
 
@@ -93,6 +94,46 @@ def warn_corrupt_rows(path, problems: Sequence[tuple[int, str]], kind: str,
             stacklevel=stacklevel + 1,
         )
     return msgs
+
+
+#: Rows above the last whose fields give its last column's format (`drop_cut_last_row`).
+FORMAT_ROWS = 50
+
+
+def drop_cut_last_row(path, lines: list[str], start: int, newline_end: bool,
+                      split: Callable[[str], list[str]], *, stacklevel: int,
+                      missing: Callable[[str], bool] = lambda f: False) -> str | None:
+    """Blank the file's last line in `lines` (0-based; data rows from index `start`) when
+    the writer was interrupted inside its last field: the file does not end with a line end
+    (`newline_end` False), the line does not end with a delimiter, and its last field does
+    not have the format of the same column on the rows above (`field_cut`; `missing` codes
+    are taken as written). Then one `UserWarning` (at `stacklevel` from this function) names
+    the file and line, and the message is returned (None when the line was written whole)."""
+    if newline_end:
+        return None
+    rows = (i for i in range(len(lines) - 1, start - 1, -1) if lines[i].strip(" \t,;\r"))
+    last = next(rows, None)
+    if last is None:
+        return None
+    fields = split(lines[last].rstrip("\r"))
+    if not fields or not fields[-1].strip():  # a delimiter closes the last field
+        return None
+    k = len(fields) - 1
+    above = []
+    for i in rows:
+        f = split(lines[i].rstrip("\r"))
+        if len(f) > k:
+            above.append(f[k])
+        if len(above) >= FORMAT_ROWS:
+            break
+    why = field_cut(fields[-1], above, missing)
+    if why is None:
+        return None
+    message = (f"{path}, line {last + 1}: truncated file (no line end after the last line, and "
+               f"{why}); that row is left out")
+    warnings.warn(message, UserWarning, stacklevel=stacklevel + 1)
+    lines[last] = ""
+    return message
 
 
 def infer_bad_times(time: np.ndarray, ok: np.ndarray, step: np.timedelta64 | None):

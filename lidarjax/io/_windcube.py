@@ -41,6 +41,7 @@ import numpy as np
 from .._util import file_error, normalise_key, require_file
 from ..progress import progress_meter
 from ._common import (
+    ends_with_line_end,
     is_number,
     offset_timedelta,
     parse_float,
@@ -48,7 +49,7 @@ from ._common import (
     parse_utc_offset,
     read_text,
 )
-from ._records import per_height_arrays, warn_corrupt_rows
+from ._records import drop_cut_last_row, per_height_arrays, warn_corrupt_rows
 
 __all__: list[str] = []
 
@@ -253,6 +254,10 @@ def read_windcube(
     lines = text.split("\n")
     version, header, header_line_of, columns, column_line = _read_header(p, text, lines, what)
     notes: list[str] = []
+    cut = drop_cut_last_row(p, lines, column_line, ends_with_line_end(text),
+                            lambda ln: ln.split("\t"), stacklevel=3)
+    if cut is not None:
+        notes.append(cut)
     columns = _unique(columns, notes, p, column_line)
     header_heights, alt_value = _header_heights(p, header, header_line_of)
     data = [ln.rstrip("\r") for ln in lines[column_line:]]

@@ -28,7 +28,7 @@ the numbers as written.
 
 **Truncated files.** A file cut while it was written (its last ray short of gates, or its
 last line cut: fewer numbers, a number cut off, or, without a final newline, a last number
-with fewer decimals than the line before) keeps its complete rays, with a one-line warning
+with other decimals than the line before) keeps its complete rays, with a one-line warning
 naming the file and line. A file malformed beyond that (a header field missing or
 unreadable, a ray or gate line that is not numbers before the end, gates out of order, a
 ray short of gates followed by more rays, no complete ray) is refused with one line naming
@@ -52,7 +52,7 @@ import numpy as np
 
 from .._util import PathLike, file_error, require_file
 from ..scanning import ScanPattern
-from ._common import read_text
+from ._common import ends_with_line_end, field_cut, read_text
 
 __all__ = ["HaloScan", "read_hpl", "INTENSITY_THRESHOLD", "HALO_PRF"]
 
@@ -218,11 +218,6 @@ def _numbers(path, line_no, text, counts, what):
     return [float(f) for f in fields]
 
 
-def _decimals(field: str) -> int:
-    mantissa = re.split(r"[eE]", field)[0]
-    return len(mantissa.partition(".")[2])
-
-
 def _read_ray(p, lines, i, n_gates, ray_counts, last, newline_end):
     """Ray line `i` (0-based) and its gate lines: ``(ray, gates (g, 4), width count)``.
     Raises `_Cut` where the problem is the file's end, a one-line ValueError otherwise."""
@@ -270,14 +265,13 @@ def _read_ray(p, lines, i, n_gates, ray_counts, last, newline_end):
 
 
 def _check_last_line(p, lines, j, last, newline_end, rows, fail):
-    """Without a final newline, the file's last line is cut when its last number has fewer
-    decimals than the same number on the line before (fixed Fortran formats)."""
+    """Without a final newline, the file's last line is cut when its last number has other
+    decimals than the same number on the line before (fixed Fortran formats: `field_cut`)."""
     if j != last or newline_end or len(rows) < 2:
         return
-    if _decimals(rows[-1][-1]) != _decimals(rows[-2][-1]):
-        fail(j, f"last line {lines[j].strip()!r} has its last number cut (no final newline, "
-                f"{_decimals(rows[-1][-1])} decimals where the line before has "
-                f"{_decimals(rows[-2][-1])})")
+    why = field_cut(rows[-1][-1], [rows[-2][-1]])
+    if why is not None:
+        fail(j, f"last line {lines[j].strip()!r} has its last number cut (no final newline: {why})")
 
 
 def read_hpl(path: PathLike) -> HaloScan:
@@ -303,7 +297,7 @@ def read_hpl(path: PathLike) -> HaloScan:
     start = _start_time(p, lines, header)
     first, spacing = _gate_layout(p, lines[:end], gate_length)
     # a line end after the last line (blanks may follow it): the line was written whole
-    newline_end = text.rstrip(" \t").endswith(("\n", "\r"))
+    newline_end = ends_with_line_end(text)
     rays, gates, cut = _read_rays(p, lines, end, n_gates, newline_end)
     n = len(rays)
     _warn_incomplete(p, n, rays_per_scan, per_scan_key, cut)

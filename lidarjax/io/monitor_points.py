@@ -389,17 +389,24 @@ class OpenFoamProbes:
                    window: tuple[float, float] | None = None) -> np.ndarray:
         """``(n, c)`` values in the row order of `locations` (probe ``i`` = row ``i``), after
         checking that OpenFOAM's header places every probe where `locations` does (to the
-        printed precision). Probes missing from the output (``includeOutOfBounds false``)
-        or not found are NaN."""
+        printed precision; to `FLOAT32_ULPS` float32 ulps of the coordinate when `locations`
+        holds float32 points or the header was printed from float32 points: every
+        coordinate a float32 number, printed with more digits than float32 holds). Probes
+        missing from the output (``includeOutOfBounds false``) or not found are NaN."""
         _check_locations(locations, "values_for")
         n = len(locations)
         if self.indices.size and int(self.indices.max()) >= n:
             raise ValueError(f"{self.path}: holds probe {int(self.indices.max())} but only {n} "
                              "locations were given; these samples belong to other probes")
-        expected = locations.points[self.indices]
+        expected = np.asarray(locations.points, np.float64)[self.indices]
         gap = np.abs(self.header_points - expected)
-        bad = np.flatnonzero(np.any(gap > 1.01 * self.header_resolution + 1e-12 * np.abs(expected),
-                                    axis=1))
+        tol = 1.01 * self.header_resolution + 1e-12 * np.abs(expected)
+        if np.asarray(locations.points).dtype == np.float32 or _float32_header(self.header_points,
+                                                                               self.header_resolution):
+            # float32 points on either side: the probes agree to float32's rounding
+            size = np.maximum(np.abs(expected), np.abs(self.header_points)).astype(np.float32)
+            tol = np.maximum(tol, FLOAT32_ULPS * np.spacing(size).astype(np.float64))
+        bad = np.flatnonzero(np.any(gap > tol, axis=1))
         if bad.size:
             k = bad[0]
             raise ValueError(
@@ -409,6 +416,21 @@ class OpenFoamProbes:
         out = np.full((n, self.values.shape[-1]), np.nan)
         out[self.indices] = self.at(time, window)
         return out
+
+
+#: Float32 ulps (of each coordinate's magnitude) by which probe locations may differ when
+#: the points on either side of `OpenFoamProbes.values_for` are float32.
+FLOAT32_ULPS = 4
+
+
+def _float32_header(points: np.ndarray, resolution: np.ndarray) -> bool:
+    """Whether header locations were printed from float32 points: every coordinate is a
+    float32 number, and some nonzero one is printed finer than float32's spacing there (so
+    that being a float32 number is no accident of a short print)."""
+    if points.size == 0 or not np.array_equal(points.astype(np.float32).astype(np.float64), points):
+        return False
+    spacing = np.spacing(np.abs(points).astype(np.float32)).astype(np.float64)
+    return bool(np.any((points != 0) & (resolution < spacing / 2)))
 
 
 _PROBE_RE = re.compile(r"^#\s*Probe\s+(\d+)\s*\(([^)]*)\)(.*)$")

@@ -194,7 +194,9 @@ def read_rtd(
 
     A corrupt row (cut short, unreadable time stamp, non-numeric cell, a position that is
     neither a number nor `V`) is left out with one `UserWarning` naming the file and lines
-    (`RtdRecord.dropped_lines`); every good row is read. Raises `FileNotFoundError` for a
+    (`RtdRecord.dropped_lines`); every good row is read. A last row cut inside its last field
+    (no line end after it, that field in another format than the column above) is left out
+    with its own one-line warning. Raises `FileNotFoundError` for a
     missing path, and a one-line `ValueError` naming the file, line and fix for the header
     errors of `read_sta` and a missing `Position` or radial wind speed column.
     """

@@ -288,6 +288,11 @@ def read_sta(
     [0, 360], availability outside [0, 100]) are flagged `IMPOSSIBLE_VALUE` and set NaN,
     never reinterpreted; CNR above 0 dB is flagged `HIGH_CNR` (advisory: cloud or fog).
 
+    **A last row cut inside its last field** (no line end after it and that field in another
+    format than the column above: ``100.00`` cut to ``10``; a writer interrupted) is left
+    out with its own one-line `UserWarning` naming the file and line; a file that only
+    lacks its final line end reads whole.
+
     Raises `FileNotFoundError` naming a missing path, and a one-line `ValueError` naming the
     file, the line and the fix for: an empty or binary/UTF-16 file, a first line that is
     not `HeaderSize=N` / `HeaderLength=N`, a missing column-names line, non-numeric

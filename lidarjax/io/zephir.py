@@ -44,8 +44,9 @@ from jaxtyping import Float, Shaped
 
 from .._util import PathLike, file_error, freeze, import_optional, normalise_key, require_file
 from ..flags import BLOCKING_FLAGS, MIN_AVAILABILITY, RecordFlag
-from ._common import offset_timedelta, parse_times, parse_utc_offset, read_text
+from ._common import ends_with_line_end, offset_timedelta, parse_times, parse_utc_offset, read_text
 from ._records import (
+    drop_cut_last_row,
     duplicate_times,
     infer_bad_times,
     per_height_arrays,
@@ -224,6 +225,14 @@ def _value(text: str, decimal: str) -> float:
     return float("nan") if v in ZEPHIR_MISSING else v
 
 
+def _is_missing(text: str, decimal: str) -> bool:
+    """Whether `text` is one of ZephIR's missing-data codes (9998, 9999, ...)."""
+    try:
+        return float(text.strip().replace(decimal, ".")) in ZEPHIR_MISSING
+    except ValueError:
+        return False
+
+
 def _detect(header_line: str) -> tuple[str, str]:
     if "\t" in header_line:
         return "\t", "."
@@ -294,18 +303,25 @@ def read_zephir_csv(
     becomes a record of NaN flagged `RecordFlag.CORRUPT_ROW` (time inferred from regular
     neighbours, or the row left out) with one `UserWarning` naming the file and lines;
     negative speeds and directions outside [0, 360] are flagged `IMPOSSIBLE_VALUE` and set
-    NaN. Raises `FileNotFoundError` for a missing path, and a one-line `ValueError` naming
-    the file, the line and the fix for: an empty, binary or UTF-16 file, no header line
-    with a time column, no per-height columns, or a bad override.
+    NaN. A last row cut inside its last field (no line end after it, that field in another
+    format than the column above; a missing code such as 9999 is taken as whole) is left out
+    with its own one-line warning. Raises `FileNotFoundError` for a missing path, and a
+    one-line `ValueError` naming the file, the line and the fix for: an empty, binary or
+    UTF-16 file, no header line with a time column, no per-height columns, or a bad override.
     """
     _check_overrides(time_convention, utc_offset_hours)
     p = require_file(path, "ZephIR CSV file")
-    lines = read_text(p).splitlines()
+    text = read_text(p)
+    lines = text.splitlines()
     if re.match(r"^\s*(HeaderSize|HeaderLength)\s*=", lines[0].lstrip("\ufeff"), re.IGNORECASE):
         raise file_error(p, 1, "this is a Windcube file (HeaderSize=/HeaderLength=), not a "
                          "ZephIR CSV export; read it with read_sta or read_rtd")
     preamble, header, header_line, delimiter, decimal = _find_header(p, lines)
     time_col, second_col, per_height, scalar_cols, notes = _map_columns(p, header, header_line)
+    cut = drop_cut_last_row(p, lines, header_line, ends_with_line_end(text),
+                            lambda ln: next(csv.reader([ln], delimiter=delimiter), []),
+                            stacklevel=2, missing=lambda f: _is_missing(f, decimal))
+    del text
     convention, zone, offset, period_s, notes = _time_conventions(
         p, preamble, header[time_col], notes, time_convention, utc_offset_hours)
     heights = np.array(sorted({h for _, h, _ in per_height}), dtype=np.float64)
@@ -327,7 +343,7 @@ def read_zephir_csv(
     utc_end = local - offset_timedelta(offset)
     if convention == "start":
         utc_end = utc_end + period
-    messages = warn_corrupt_rows(p, problems, "record", stacklevel=2)
+    messages = warn_corrupt_rows(p, problems, "record", stacklevel=2) + ([cut] if cut else [])
     for note in notes:
         if "same quantity" in note:
             warnings.warn(note, stacklevel=2)

@@ -67,3 +67,37 @@ def test_values_csv_reads_names_and_nan(tmp_path):
     path.write_text("name,u,v\n")
     with pytest.raises(ValueError, match="v.csv, line 1: header lacks w"):
         read_monitor_values_csv(path)
+
+
+def _float32_points(p, points):
+    return MonitorPoints(p.names, p.mount, points, p.beta, p.height, p.beam, p.node, p.weight)
+
+
+@pytest.mark.parametrize("written", ["float32", "float64"])
+def test_values_for_float32_points_on_either_side(tmp_path, written):
+    """Probes written (at full precision) from float32 points match the float64 points they
+    were rounded from, and float32 points match a float64 file: the check allows float32's
+    rounding (up to 4e-7 m here), where the printed precision alone (1e-17 m) refused them."""
+    p64 = _float32_points(points(), np.array([[0.1, -1 / 3, 10.7], [1.5, 2.2, 11.3], [-3.9, 0.0, 12.1]]))
+    p32 = _float32_points(p64, p64.points.astype(np.float32))
+    vals = np.arange(9.0).reshape(3, 3)
+    write_probes_output(tmp_path / "U", p32 if written == "float32" else p64, [(1, vals)])
+    out = read_openfoam_probes(tmp_path / "U")
+    other = p64 if written == "float32" else p32
+    gap = np.abs(out.header_points - np.asarray(other.points, np.float64))
+    assert np.any(gap > 1.01 * out.header_resolution) and 1e-9 < np.max(gap) < 1e-6
+    np.testing.assert_array_equal(out.values_for(other), vals)
+    np.testing.assert_array_equal(out.values_for(p32 if written == "float32" else p64), vals)
+    # a real misplacement is still refused, float32 or not
+    off = _float32_points(other, np.asarray(other.points) + np.array([0.0, 1e-3, 0.0], other.points.dtype))
+    with pytest.raises(ValueError, match="written for other probes"):
+        out.values_for(off)
+
+
+def test_values_for_float64_keeps_the_printed_precision(tmp_path):
+    """A float64 file and float64 points: a float32-sized gap (1e-8 m) is still refused."""
+    p = _float32_points(points(), np.array([[0.1, -1 / 3, 10.7], [1.5, 2.2, 11.3], [-3.9, 0.0, 12.1]]))
+    write_probes_output(tmp_path / "U", p, [(1, np.zeros((3, 3)))])
+    shifted = _float32_points(p, p.points + 1e-8)
+    with pytest.raises(ValueError, match="written for other probes"):
+        read_openfoam_probes(tmp_path / "U").values_for(shifted)
