@@ -24,7 +24,8 @@ sheared tensor) correlated between nodes as the tensor says, unlike the Kaimal m
 
 **Quadrature.** Over ``(k2, k3)`` a tensor product of one rule per axis: by default
 ``k = s tan(theta)``, ``theta`` at `n_nodes` Gauss–Legendre nodes in ``(-pi/2, pi/2)``
-(the whole real line, denser near 0), ``s`` = `scale` / ``L``; or, with `box`, the
+(the whole real line, denser near 0), ``s = scale * sqrt(L^-2 + k1^2)`` (the tensor's width
+at that frequency); or, with `box`, the
 wavenumber lattice of a periodic box (``2 pi m / (n d)``, weights ``2 pi / (n d)``): exactly
 the content of an FFT Mann box of that lateral and vertical size (`lidarjax.fft_mann_box`).
 The amplitudes are sums of exponentials evaluated at the nodes, so the integrand is exact
@@ -59,8 +60,8 @@ class MannInflow(eqx.Module):
     - `sigma_u`: (keyword) the infinite-domain standard deviation of ``u`` (m/s) that sets
       `alphaepsilon` (`lidarjax.mann_spectrum_level`, on the host: not differentiable).
     - `n_nodes`: (keyword, static) quadrature nodes per axis of ``(k2, k3)`` (default 96).
-    - `scale`: (keyword) the quadrature's ``s L`` (dimensionless, default 1): half the nodes
-      lie within ``|k| < scale / L``.
+    - `scale`: (keyword) the quadrature's width in units of the tensor's, ``s / sqrt(L^-2 +
+      k1^2)`` (dimensionless, default 1): half the nodes of each axis lie within ``|k| < s``.
     - `box`, `box_spacing`: (keyword) ``(ny, nz)`` (static) and ``(dy, dz)`` (m): sum over
       the wavenumber lattice of a periodic box of that lateral and vertical size instead of
       integrating (the analytic model of a finite box; ``k1`` stays continuous).
