@@ -57,6 +57,8 @@ __all__ = [
     "mann_spectrum_level",
     "mann_tensor",
     "mann_eddy_lifetime",
+    "eddy_lifetime_jax",
+    "mann_tensor_jax",
     "box_wavenumbers",
     "box_variance",
 ]
@@ -342,6 +344,37 @@ def mann_eddy_lifetime(kl):
     return np.where(kl > 0, out, np.inf)
 
 
+def _hyp2f1_series(a, b, c, x, n_terms=64):
+    """``2F1(a, b; c; x)`` by its first `n_terms` Taylor terms (Horner; for ``0 <= x <= 1/2``
+    the truncation error is below ``2^-n_terms`` times a slowly growing factor)."""
+    ratio = [(a + i) * (b + i) / ((c + i) * (i + 1)) for i in range(n_terms - 1)]
+    coef = np.cumprod(np.concatenate([[1.0], ratio]))
+    return jnp.polyval(jnp.asarray(coef[::-1], x.dtype), x)
+
+
+def eddy_lifetime_jax(kl):
+    """`mann_eddy_lifetime` in JAX (differentiable, jit-compatible; ``kl > 0``), agreeing with
+    scipy's to 1e-14 relative. With ``x = kL``, ``F = 2F1(1/3, 17/6; 4/3; -x^-2)`` is summed as
+    a Taylor series whose argument is at most 1/2 (JAX's own ``hyp2f1`` is slow, and wrong
+    for arguments below -1): for ``x >= 1`` by Pfaff's transformation, ``F = (1 + x^-2)^(-1/3)
+    2F1(1/3, -3/2; 4/3; 1 / (1 + x^2))``; for ``x < 1`` by the ``1/z`` transformation (its
+    first term's series is exactly 1) followed by Pfaff's, ``F = C1 x^(2/3) + C2 x^(17/3)
+    (1 + x^2)^(-5/2) 2F1(5/2, 2/3; 7/2; x^2 / (1 + x^2))``, ``C1 = G(4/3) G(5/2) / G(17/6)``,
+    ``C2 = G(4/3) G(-5/2) / (G(1/3) G(-3/2))``."""
+    x = jnp.asarray(kl)
+    big = x >= 1
+    xb = jnp.where(big, x, 1.0)
+    xs = jnp.where(big, 0.5, x)
+    f_big = (1 + xb**-2.0) ** (-1.0 / 3.0) * _hyp2f1_series(1 / 3, -1.5, 4 / 3, 1 / (1 + xb**2))
+    g = special.gamma
+    c1 = g(4 / 3) * g(2.5) / g(17 / 6)
+    c2 = g(4 / 3) * g(-2.5) / (g(1 / 3) * g(-1.5))
+    x2 = xs**2
+    f_small = c1 * xs ** (2.0 / 3.0) + c2 * xs ** (17.0 / 3.0) * (1 + x2) ** -2.5 * _hyp2f1_series(
+        2.5, 2 / 3, 3.5, x2 / (1 + x2))
+    return x ** (-2.0 / 3.0) / jnp.sqrt(jnp.where(big, f_big, f_small))
+
+
 def mann_tensor(k, alphaepsilon, length_scale, gamma):
     """The Mann (1994) spectral velocity tensor ``Phi_ij(k)`` in ``(m/s)^2 m^3`` (variance per
     unit volume of wavenumber space, so ``sum_k Phi dk`` is a covariance in m^2/s^2) at
@@ -354,39 +387,49 @@ def mann_tensor(k, alphaepsilon, length_scale, gamma):
     wavevector ``k0 = (k1, k2, k3 + beta k1)``, ``beta = Gamma * mann_eddy_lifetime(kL)``. The
     ``arctan`` of the distortion uses the two-argument form (as hipersim does); on ``k1 = 0``
     the limit ``zeta1 = -beta``, ``zeta2 = 0`` is taken. With ``Gamma = 0`` it is the isotropic
-    von Karman tensor ``E(k) / (4 pi k^4) (k^2 delta_ij - k_i k_j)``.
+    von Karman tensor ``E(k) / (4 pi k^4) (k^2 delta_ij - k_i k_j)``. Host numpy, float64;
+    `mann_tensor_jax` is the same formulas in JAX.
     """
     with np.errstate(divide="ignore", invalid="ignore"):
         return _mann_tensor(np.asarray(k, dtype=np.float64), float(alphaepsilon), float(length_scale),
-                            float(gamma))
+                            float(gamma), np, mann_eddy_lifetime)
 
 
-def _mann_tensor(k, alphaepsilon, L, gamma):
+def mann_tensor_jax(k, alphaepsilon, length_scale, gamma):
+    """`mann_tensor` in JAX: the same formulas, jit-compatible and differentiable in `k` and
+    the three parameters (`eddy_lifetime_jax`); results in `k`'s dtype. Zero at ``k = 0``
+    (finite gradients need ``k1 != 0`` and ``(k1, k2) != 0``)."""
+    k = jnp.asarray(k)
+    return _mann_tensor(k, jnp.asarray(alphaepsilon, k.dtype), jnp.asarray(length_scale, k.dtype),
+                        jnp.asarray(gamma, k.dtype), jnp, eddy_lifetime_jax)
+
+
+def _mann_tensor(k, alphaepsilon, L, gamma, xp, lifetime):
+    """The tensor's formulas on array module `xp` (numpy or jax.numpy) with its eddy lifetime."""
     k1, k2, k3 = k[..., 0], k[..., 1], k[..., 2]
     ksq = k1 * k1 + k2 * k2 + k3 * k3
     zero = ksq == 0
-    ksq_s = np.where(zero, 1.0, ksq)
-    kmag = np.sqrt(ksq_s)
-    beta = float(gamma) * mann_eddy_lifetime(kmag * L)
+    ksq_s = xp.where(zero, 1.0, ksq)
+    kmag = xp.sqrt(ksq_s)
+    beta = gamma * lifetime(kmag * L)
     k30 = k3 + beta * k1
     k0sq = k1 * k1 + k2 * k2 + k30 * k30
-    kl0 = np.sqrt(k0sq) * L
-    e0 = float(alphaepsilon) * L ** (5.0 / 3.0) * kl0**4 / (1.0 + kl0**2) ** (17.0 / 6.0)
+    kl0 = xp.sqrt(k0sq) * L
+    e0 = alphaepsilon * L ** (5.0 / 3.0) * kl0**4 / (1.0 + kl0**2) ** (17.0 / 6.0)
     khsq = k1 * k1 + k2 * k2
-    kh = np.sqrt(khsq)
     on_axis = khsq == 0  # k1 = k2 = 0: no distortion term survives
-    khsq_s = np.where(on_axis, 1.0, khsq)
-    kh_s = np.where(on_axis, 1.0, kh)
+    khsq_s = xp.where(on_axis, 1.0, khsq)
+    kh_s = xp.sqrt(khsq_s)
     c1 = beta * k1 * k1 * (k0sq - 2 * k30 * k30 + beta * k1 * k30) / (ksq_s * khsq_s)
-    ang = np.arctan2(beta * k1 * kh, k0sq - k30 * k1 * beta)
+    ang = xp.arctan2(beta * k1 * kh_s, k0sq - k30 * k1 * beta)
     k1z = k1 == 0
-    k1_s = np.where(k1z, 1.0, k1)
+    k1_s = xp.where(k1z, 1.0, k1)
     pref = k2 * k0sq / kh_s**3
     c2 = pref * ang
-    zeta1 = np.where(k1z, -beta, c1 - (k2 / k1_s) * c2)
-    zeta2 = np.where(k1z, 0.0, (k2 / k1_s) * c1 + c2)
-    zeta1 = np.where(on_axis, 0.0, zeta1)
-    zeta2 = np.where(on_axis, 0.0, zeta2)
+    zeta1 = xp.where(k1z, -beta, c1 - (k2 / k1_s) * c2)
+    zeta2 = xp.where(k1z, 0.0, (k2 / k1_s) * c1 + c2)
+    zeta1 = xp.where(on_axis, 0.0, zeta1)
+    zeta2 = xp.where(on_axis, 0.0, zeta2)
     a = e0 / (4 * np.pi * k0sq**2)
     p11 = a * (k0sq - k1 * k1 - 2 * k1 * k30 * zeta1 + khsq * zeta1**2)
     p22 = a * (k0sq - k2 * k2 - 2 * k2 * k30 * zeta2 + khsq * zeta2**2)
@@ -395,9 +438,9 @@ def _mann_tensor(k, alphaepsilon, L, gamma):
     b = e0 / (4 * np.pi * k0sq * ksq_s)
     p13 = b * (-k1 * k30 + khsq * zeta1)
     p23 = b * (-k2 * k30 + khsq * zeta2)
-    phi = np.stack([np.stack([p11, p12, p13], -1), np.stack([p12, p22, p23], -1),
-                    np.stack([p13, p23, p33], -1)], -2)
-    return np.where(zero[..., None, None], 0.0, phi)
+    phi = xp.stack([xp.stack([p11, p12, p13], -1), xp.stack([p12, p22, p23], -1),
+                    xp.stack([p13, p23, p33], -1)], -2)
+    return xp.where(zero[..., None, None], 0.0, phi)
 
 
 def box_wavenumbers(shape, spacing):

@@ -3,6 +3,8 @@ spectra and coherence, and the feed-forward filter they design (Task 52's model)
 
 - `inflow`: `KaimalInflow` (IEC Kaimal spectra and the IEC coherence),
   `iec_turbulence_intensity`.
+- `mann`: `MannInflow` (the Mann spectral tensor of lidarjax's turbulence boxes; `lac_spectra`
+  integrates it over the lateral and vertical wavenumbers).
 - `geometry`: `RotorDisc`/`rotor_disc`, `LidarSamples`/`lidar_samples`, `cone_points`
   (the rotor frame: ``x`` upstream along the rotor axis, metres).
 - `spectra`: `lac_spectra` -> `LacSpectra` (``S_RR``, ``S_LL``, ``S_RL``, coherence,
@@ -27,6 +29,7 @@ from .geometry import rotor_disc as rotor_disc
 from .inflow import IEC_REFERENCE_INTENSITY as IEC_REFERENCE_INTENSITY
 from .inflow import KaimalInflow as KaimalInflow
 from .inflow import iec_turbulence_intensity as iec_turbulence_intensity
+from .mann import MannInflow as MannInflow
 from .rews import lidar_rews as lidar_rews
 from .rews import rotor_rews as rotor_rews
 from .rews import rotor_to_cfd as rotor_to_cfd
@@ -42,7 +45,8 @@ from .synthesis import kaimal_rews_series as kaimal_rews_series
 from .synthesis import welch_coherence as welch_coherence
 
 __all__ = [
-    "HALF_POWER", "IEC_REFERENCE_INTENSITY", "KaimalInflow", "LacSpectra", "LidarSamples", "RewsSeries",
+    "HALF_POWER", "IEC_REFERENCE_INTENSITY", "KaimalInflow", "LacSpectra", "LidarSamples", "MannInflow",
+    "RewsSeries",
     "RotorDisc",
     "buffer_time", "coherence_band", "coherence_bandwidth", "cone_points", "filter_cutoff", "filter_delay",
     "iec_turbulence_intensity", "kaimal_rews_series", "lac_spectra", "lidar_rews", "lidar_samples",

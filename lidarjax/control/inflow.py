@@ -35,18 +35,22 @@ def iec_turbulence_intensity(mean_speed, turbulence_class: str = "B"):
     return IEC_REFERENCE_INTENSITY[turbulence_class] * (0.75 * u + 5.6) / u
 
 
-def _positive(name, value):
+def _positive(name, value, owner="KaimalInflow", *, allow_zero=False):
+    """`value` as a floating scalar array; a concrete one must be finite and positive (or
+    zero with `allow_zero`), else a ValueError naming `owner` and `name`."""
     value = jnp.asarray(value)
     if not jnp.issubdtype(value.dtype, jnp.floating):
         value = value.astype(jnp.asarray(0.0).dtype)
     if not isinstance(value, jnp.ndarray) or value.ndim:
-        raise ValueError(f"KaimalInflow: {name} must be a scalar, got shape {value.shape}")
+        raise ValueError(f"{owner}: {name} must be a scalar, got shape {value.shape}")
     try:
-        bad = not float(value) > 0 or not np.isfinite(float(value))
+        v = float(value)
+        bad = not (v >= 0 if allow_zero else v > 0) or not np.isfinite(v)
     except Exception:  # a tracer: cannot check, keep it
         bad = False
     if bad:
-        raise ValueError(f"KaimalInflow: {name} must be a finite positive number, got {float(value)}")
+        kind = "non-negative" if allow_zero else "positive"
+        raise ValueError(f"{owner}: {name} must be a finite {kind} number, got {float(value)}")
     return value
 
 

@@ -34,6 +34,7 @@ from .._precision import is_concrete, safe_sqrt
 from .._util import compiled
 from .geometry import LidarSamples, RotorDisc
 from .inflow import KaimalInflow
+from .mann import MannInflow, _mann_spectra
 
 __all__ = ["HALF_POWER", "LacSpectra", "buffer_time", "coherence_bandwidth", "filter_cutoff", "filter_delay",
            "lac_spectra"]
@@ -113,7 +114,7 @@ def _spectra(samples, rotor, inflow, frequency, classes=None):
     return LacSpectra(frequency=f, S_RR=s_rr, S_LL=s_ll, S_RL=s_rl, mean_speed=inflow.mean_speed)
 
 
-def lac_spectra(samples: LidarSamples, rotor: RotorDisc, inflow: KaimalInflow,
+def lac_spectra(samples: LidarSamples, rotor: RotorDisc, inflow: KaimalInflow | MannInflow,
                 frequency: Float[ArrayLike, " f"]) -> LacSpectra:
     """``S_RR``, ``S_LL``, ``S_RL`` of the REWS and its lidar estimate (see the module docs).
 
@@ -121,7 +122,8 @@ def lac_spectra(samples: LidarSamples, rotor: RotorDisc, inflow: KaimalInflow,
 
     - `samples`: the lidar's nodes (`lidar_samples`).
     - `rotor`: the rotor disc (`rotor_disc`).
-    - `inflow`: the turbulence (`KaimalInflow`).
+    - `inflow`: the turbulence: `KaimalInflow` (the model above) or `MannInflow` (the Mann
+      tensor, `lidarjax.control.mann`; chosen by type when traced).
     - `frequency`: ``(f,)`` frequencies (Hz, positive).
 
     **Returns:** `LacSpectra`. Differentiable in every number of `samples` and `inflow`.
@@ -132,6 +134,13 @@ def lac_spectra(samples: LidarSamples, rotor: RotorDisc, inflow: KaimalInflow,
                          f"got shape {f.shape}")
     if isinstance(f, np.ndarray) and not np.all(f > 0):
         raise ValueError("lac_spectra: frequency must be positive (Hz)")
+    if isinstance(inflow, MannInflow):
+        f = jnp.asarray(f)
+        s_rr, s_ll, s_rl = _mann_spectra(samples, rotor, inflow, f)
+        return LacSpectra(frequency=f, S_RR=s_rr, S_LL=s_ll, S_RL=s_rl, mean_speed=inflow.mean_speed)
+    if not isinstance(inflow, KaimalInflow):
+        raise ValueError(f"lac_spectra: inflow must be a KaimalInflow or a MannInflow, got "
+                         f"{type(inflow).__name__}")
     return _spectra(samples, rotor, inflow, jnp.asarray(f), _symmetry_classes(samples, rotor))
 
 
