@@ -681,7 +681,8 @@ def _stacked_runs(sims) -> Simulation:
             f"ResponseTable.from_simulations: every run needs the same heights and beams; "
             f"got LOS shapes {sorted(shapes)}."
         )
-    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *sims)
+    # on the host: one device program per leaf shape otherwise (the table is host arrays)
+    return jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(x) for x in a]), *sims)
 
 
 def _free_streams(stacked: Simulation):

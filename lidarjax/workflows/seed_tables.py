@@ -147,8 +147,11 @@ def simulate_settings(
             continue
         batch = simulate_rotations(stacked, scan, runs.batch_mount(idx), runs.heights,
                                    u_refs=u_ref, probe=probe)
+        # split on the host and put back: indexing each device leaf compiles a program per
+        # leaf shape (jnp.asarray of a host array compiles nothing)
+        host = jax.device_get(batch)
         for j, k in enumerate(idx):
-            out[runs.betas[k]] = jax.tree_util.tree_map(lambda a, j=j: a[j], batch)
+            out[runs.betas[k]] = jax.tree_util.tree_map(lambda a, j=j: jnp.asarray(a[j]), host)
     return out
 
 

@@ -40,8 +40,10 @@ class Tracker:
         self.max_alive = 0
 
     def __call__(self, beta):
-        gc.collect()
         alive = sum(r() is not None for r in self.refs)
+        if alive:  # held only by reference cycles? (a full collection takes ~1 s here)
+            gc.collect()
+            alive = sum(r() is not None for r in self.refs)
         self.max_alive = max(self.max_alive, alive + 1)
         f = run_field(beta)
         self.refs.append(weakref.ref(f))
