@@ -288,6 +288,7 @@ def _in_batches(run, los, w_r, noise, per_batch, n_real):
             jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)]),
         )
         xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
+        run = jax.jit(run)  # traced once: for its shapes here and in the cond below
         shapes = jax.eval_shape(run, jax.tree_util.tree_map(lambda x: x[0], xs))
         skipped = lambda x: jax.tree_util.tree_map(  # noqa: E731
             lambda s: jnp.zeros(s.shape, s.dtype), shapes)
