@@ -50,6 +50,26 @@ def compiled(fn):
     return call
 
 
+def map_in_batches(fn, xs, batch_size: int):
+    """``jax.lax.map(fn, xs, batch_size=batch_size)`` in equal batches: as many batches as
+    that, each at most `batch_size` rows, the leading axis padded to whole batches (fewer
+    rows than batches; copies of the first row, whose results are dropped). `lax.map` would
+    trace and compile `fn` a second time for a remainder batch. `xs` a pytree of arrays; the
+    same results, `fn` in one program."""
+    n = jax.tree_util.tree_leaves(xs)[0].shape[0]
+    if batch_size >= n:
+        return jax.lax.map(fn, xs, batch_size=batch_size)
+    n_batches = -(-n // batch_size)
+    batch_size = -(-n // n_batches)
+    pad = n_batches * batch_size - n
+    if not pad:
+        return jax.lax.map(fn, xs, batch_size=batch_size)
+    xs = jax.tree_util.tree_map(
+        lambda a: jnp.concatenate([a, jnp.repeat(a[:1], pad, axis=0)]), xs)
+    out = jax.lax.map(fn, xs, batch_size=batch_size)
+    return jax.tree_util.tree_map(lambda a: a[:n], out)
+
+
 def _as_input(value):
     """A Python number, list or tuple as an array (a dynamic input of `compiled`)."""
     if isinstance(value, int | float | list | tuple) and not isinstance(value, bool):

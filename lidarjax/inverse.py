@@ -288,6 +288,7 @@ def _in_batches(run, los, w_r, noise, per_batch, n_real):
             jnp.concatenate([noise, jnp.full((pad, h), jnp.nan, noise.dtype)]),
         )
         xs = jax.tree_util.tree_map(lambda x: x.reshape((-1, per_batch) + x.shape[1:]), xs)
+        run = jax.jit(run)  # traced once: for its shapes here and in the cond below
         shapes = jax.eval_shape(run, jax.tree_util.tree_map(lambda x: x[0], xs))
         skipped = lambda x: jax.tree_util.tree_map(  # noqa: E731
             lambda s: jnp.zeros(s.shape, s.dtype), shapes)
@@ -974,11 +975,7 @@ def invert_joint_reconstructed(
     dtype = speed.dtype if jnp.issubdtype(speed.dtype, jnp.floating) else table.dtype
     speed = jnp.broadcast_to(speed, shape).astype(dtype)
     direction = jnp.broadcast_to(direction, shape).astype(dtype)
-    calm = speed == 0
-    impossible = speed < 0
-    rad = jnp.deg2rad(jnp.where(calm, 0.0, direction))
-    uv = jnp.stack([-speed * jnp.sin(rad), -speed * jnp.cos(rad)], axis=-1)
-    uv = jnp.where(impossible[..., None], jnp.nan, uv)
+    uv, impossible = _reported_uv(speed, direction)
     sp = table.reconstructed_spline
     sub = PeriodicSpline(sp.start, sp.offsets, sp.widths, sp.coefficients[..., :2], sp.uniform)
     valid = jnp.ones((table.n_heights, 2), bool)

@@ -536,6 +536,7 @@ class ResponseTable(eqx.Module):
             )
         return spline
 
+    @compiled
     def response_at(self, direction: Float[ArrayLike, ...]) -> Float[Array, "... h b"]:
         """LOS per unit free-stream speed at meteorological `direction` (degrees, one per
         record, the same for all heights): ``(..., h, b)``; NaN for missing beams."""
@@ -1172,6 +1173,7 @@ class ProfileTable(eqx.Module):
         return parameter_weights(self.parameters, self.parameter_widths, self.parameter_basis,
                                  parameter, extrapolate=extrapolate)
 
+    @compiled
     def response_at(self, direction: Float[ArrayLike, ...], parameter: Float[ArrayLike, ...],
                     *, extrapolate: bool = False) -> Float[Array, "... h b"]:
         """LOS per unit local free-stream speed ``(..., h, b)`` at meteorological `direction`
@@ -1184,6 +1186,7 @@ class ProfileTable(eqx.Module):
         out = jnp.einsum("...p,...phb->...hb", w, v, precision=jax.lax.Precision.HIGHEST)
         return jnp.where(self.valid, out, jnp.nan)
 
+    @compiled
     def reconstructed_at(self, direction, parameter, *, extrapolate: bool = False):
         """Reconstructed vector per unit local speed ``(..., h, 3)``, north frame."""
         if self.reconstructed_spline is None:

@@ -68,6 +68,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._backend import default_batch, positive_size
 from ._precision import HIGHEST
+from ._util import map_in_batches
 from .angles import heading, horizontal_speed, wind_direction, wrap180
 from .batch import _is_stacked, _n_stacked, rotation_arguments, unstack_field
 from .corrections import DEFAULT_RATIO_TOL
@@ -664,9 +665,9 @@ def _with_inverse(table, value, jac, inv_outputs):
     plus one column for the record noise (the norm of the LOS gradient)."""
     inv = _inverse_fn(table)
     los = value["los"]
-    inv_val = inv(los)
-    # d(inverse)/d(LOS) at the nominal LOS: implicit gradients of `invert`
-    g_all = jax.jacfwd(inv)(los)  # per output (h,) + (h, b)
+    # d(inverse)/d(LOS) at the nominal LOS: implicit gradients of `invert`, with its values
+    # (one trace of the solver)
+    g_all, inv_val = jax.jacfwd(lambda x: (lambda r: (r, r))(inv(x)), has_aux=True)(los)  # (h,)+(h, b)
     h_idx = jnp.arange(los.shape[0])
     j_los = jnp.where(jnp.isfinite(jac["los"]), jac["los"], 0.0)
     for o in inv_outputs:
@@ -687,7 +688,7 @@ def _monte_carlo(sample, value, k, chol, n_mc, chunk, p, fwd_outputs, inv_output
     k1, k2 = jax.random.split(k)
     z = jax.random.normal(k1, (n_mc, p), dtype)
     deltas = jnp.matmul(z, chol.T.astype(dtype), precision=HIGHEST)
-    draws = jax.lax.map(sample, deltas, batch_size=chunk)
+    draws = map_in_batches(sample, deltas, chunk)
     for o in fwd_outputs:
         mc[o] = _mc_stats(draws[o], value[o], o)
     if inv_outputs:

@@ -25,6 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._util import map_in_batches
+
 #: The objective value an infeasible point is given (finite, so that the line search backs off).
 INFEASIBLE = 1e30
 
@@ -285,7 +287,7 @@ def _executable(fn, static, treedef, avals, statics, fast, backend):
 
 def _run(fn, problem, cand, lo, hi, solver, max_steps, n_starts, batch_size, grid_shape=None):
     """The whole search as one compiled program (module docs)."""
-    values, ok = jax.lax.map(lambda x: fn(problem, x)[:2], cand, batch_size=batch_size)
+    values, ok = map_in_batches(lambda x: fn(problem, x)[:2], cand, batch_size)
     ok = ok & jnp.isfinite(values)
     score = jnp.where(ok, values, jnp.inf)
     if grid_shape is not None:  # local minima of the coarse grid first: one start per basin

@@ -175,9 +175,15 @@ def lac_objective(turbine, inflow: KaimalInflow, x, *, n_points: int = 4, distan
     pb, _, _, _ = _problem(turbine, inflow, n_points=n_points, distance=distance, half_cone=half_cone,
                            gate_length=gate_length, lidar=lidar, frequency=frequency, spacing=spacing,
                            objective=objective)
-    run = jax.jit(lambda p, x: jax.lax.map(lambda xi: _objective(p, xi)[::2], x))
-    values, bw = run(pb, jnp.asarray(x, pb.fixed.dtype))
+    values, bw = _objective_map(pb, jnp.asarray(x, pb.fixed.dtype))
     return np.asarray(values), np.asarray(bw)
+
+
+@jax.jit
+def _objective_map(pb, x):
+    """``(values, bandwidths)`` at every row of `x`: one program per problem structure (a
+    `jax.jit` of a fresh lambda per call would compile again every call)."""
+    return jax.lax.map(lambda xi: _objective(pb, xi)[::2], x)
 
 
 def design_lac_scan(turbine, inflow: KaimalInflow, *, n_points: Sequence[int] = (4,),

@@ -59,6 +59,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._precision import safe_sqrt
+from .._util import map_in_batches
 from ..angles import heading as heading_vector
 from ..angles import wind_direction
 from ..batch import rotation_arguments, stack_fields, unstack_field
@@ -704,7 +705,7 @@ def evaluate_placements(problem, xs: Float[ArrayLike, "m d"], *, batch_size: int
 
 @eqx.filter_jit
 def _many_jit(problem, xs, batch_size):
-    return jax.lax.map(lambda x: _objective(problem, x)[:2], xs, batch_size=batch_size)
+    return map_in_batches(lambda x: _objective(problem, x)[:2], xs, batch_size)
 
 
 def _errors(pb, cff_u, cff_th):
