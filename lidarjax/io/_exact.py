@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._util import compiled
 from ..beam import simulate_points
 from ..field import (
     AbstractField,
@@ -213,6 +214,7 @@ class CellPointField(_Prepared, AbstractField):
         """Index of the nearest prepared point `(...)` and whether it is within tolerance."""
         return self.index.match(points)
 
+    @compiled  # one program from the host (inlined inside a trace)
     def sample_local(self, points: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
         """Velocity (m/s, CFD frame) at points relative to `origin` (metres): cellPoint at the
         prepared points (NaN there in no cell), the grid's trilinear value elsewhere."""
@@ -319,6 +321,7 @@ class CellPointSnapshots(_Prepared, AbstractField):
         """The first snapshot's velocity (m/s, CFD frame) at local points (metres)."""
         return self.sample_local_at(points, self.grid.times[0])
 
+    @compiled  # one program from the host (inlined inside a trace)
     def sample_local_at(self, points, time):
         """Velocity (m/s, CFD frame) at local points (metres) and times (s): cellPoint at the
         prepared points, the grid's snapshots elsewhere; linear in time."""
@@ -327,6 +330,7 @@ class CellPointSnapshots(_Prepared, AbstractField):
         exact = _lerp_in_time(e0, e1, s[..., None], ok[..., None])
         return jnp.where(hit[..., None], exact, self.grid.sample_local_at(points, time))
 
+    @compiled  # one program from the host (inlined inside a trace)
     def los_local_at(self, points, directions, time):
         """Velocity along unit `directions` (m/s) at local points and times, as
         `sample_local_at`."""

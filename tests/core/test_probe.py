@@ -111,10 +111,13 @@ class QuadraticAlongBeam(lj.AbstractField):
         return (a + b * s + c * s**2)[..., None] * self.n
 
 
+@eqx.filter_jit  # one program per node count (static), not one per jax.numpy operation
+def _beam_los_compiled(field, probe, ranges):
+    return beam_los(field, jnp.zeros(3), field.n[None, :], ranges, probe)[0]
+
+
 def _probe_los(field, probe, focus):
-    n = field.n[None, :]
-    los, _ = beam_los(field, jnp.zeros(3), n, jnp.array([[focus]]), probe)
-    return float(los[0, 0])
+    return float(_beam_los_compiled(field, probe, jnp.array([[focus]]))[0, 0])
 
 
 def test_pulsed_los_in_a_quadratic_field_converges_to_the_second_moment():

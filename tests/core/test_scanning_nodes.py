@@ -14,7 +14,7 @@ import pytest
 import lidarjax as lj
 from lidarjax import scanning as sc
 
-from ..helpers import assert_grad_matches_fd
+from ..helpers import assert_grad_matches_fd, central_difference
 
 SPACING = 10.0
 
@@ -180,9 +180,15 @@ def test_gradients_through_shared_nodes(grid, ppi, probe):
         return jnp.sum(jnp.where(ok, los, 0.0) ** 2)
 
     loc = jnp.asarray([3.0, -4.0, 30.0])
-    g_v = jax.grad(loss)(jnp.asarray(vel), loc)
+    # both reverse-mode derivatives from one pass (one forward and one transposed program),
+    # then as `assert_grad_matches_fd` for the mount: forward mode and central differences
+    g_v, g_loc = jax.grad(loss, argnums=(0, 1))(jnp.asarray(vel), loc)
     assert np.isfinite(np.asarray(g_v)).all() and np.abs(np.asarray(g_v)).max() > 0
-    assert_grad_matches_fd(lambda at: loss(jnp.asarray(vel), at), loc, rtol=1e-5)
+    g_loc = np.asarray(g_loc)
+    assert np.all(np.isfinite(g_loc)), g_loc
+    at_loc = lambda at: loss(jnp.asarray(vel), at)  # noqa: E731
+    np.testing.assert_allclose(g_loc, np.asarray(jax.jacfwd(at_loc)(loc)), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(g_loc, central_difference(at_loc, loc), rtol=1e-5, atol=1e-8)
     direction = jnp.asarray(np.random.default_rng(0).normal(size=vel.shape))
     v = jnp.asarray(vel)
     fd = (loss(v + 1e-6 * direction, loc) - loss(v - 1e-6 * direction, loc)) / 2e-6
@@ -194,8 +200,10 @@ def test_window_mean_numpy_nan_and_gradients():
     i m + q - 1`` as numpy computes them, NaN exactly where a window holds a NaN sample, and
     derivatives (samples and weights) finite for a loss that masks the NaN windows, matching
     finite differences."""
-    from lidarjax.beam import _window_mean
+    from lidarjax.beam import _window_mean as window_mean
 
+    # compiled (m static): one program per transformation, not one per jax.numpy operation
+    _window_mean = jax.jit(window_mean, static_argnums=2)
     rng = np.random.default_rng(5)
     m, q, g = 3, 7, 9
     samples = rng.normal(size=(2, 4, (g - 1) * m + q))
@@ -209,13 +217,15 @@ def test_window_mean_numpy_nan_and_gradients():
     np.testing.assert_allclose(got, expect, atol=1e-14, equal_nan=True)
     ok = np.isfinite(expect)
 
+    @jax.jit
     def loss(s, w):
-        return jnp.sum(jnp.where(ok, _window_mean(s, w, m), 0.0) ** 2)
+        return jnp.sum(jnp.where(ok, window_mean(s, w, m), 0.0) ** 2)
 
-    g_s, g_w = jax.grad(loss, argnums=(0, 1))(jnp.asarray(samples), jnp.asarray(phi))
+    g_s, g_w = jax.jit(jax.grad(loss, argnums=(0, 1)))(jnp.asarray(samples), jnp.asarray(phi))
     assert np.isfinite(np.asarray(g_s)).all() and np.isfinite(np.asarray(g_w)).all()
     clean = jnp.asarray(np.nan_to_num(samples))
-    assert_grad_matches_fd(lambda w: loss(jnp.asarray(samples), w), jnp.asarray(phi), rtol=1e-6)
+    assert_grad_matches_fd(lambda w: loss(jnp.asarray(samples), w), jnp.asarray(phi), rtol=1e-6,
+                           jit=True)
     direction = jnp.asarray(rng.normal(size=samples.shape))
     w = jnp.asarray(phi)
     fd = (loss(clean + 1e-6 * direction, w) - loss(clean - 1e-6 * direction, w)) / 2e-6

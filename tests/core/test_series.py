@@ -268,8 +268,9 @@ def test_sharded_over_forced_host_devices():
         np.testing.assert_allclose(st.speed_std, 0.0, atol=1e-9)
         print("OK", st.speed.shape)
     """)
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",
-               JAX_PLATFORMS="cpu")
+    # the suite's quick CPU compilation flags (tests/conftest.py) kept, two devices added
+    flags = os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
+    env = dict(os.environ, XLA_FLAGS=flags.strip(), JAX_PLATFORMS="cpu")
     root = str(REPO)
     env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
