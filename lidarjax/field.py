@@ -795,7 +795,21 @@ def _lerp_in_time(v0, v1, s, ok):
     return jnp.where(ok, v0 + s * (v1 - v0), jnp.nan)
 
 
-class SnapshotField(AbstractField):
+class OnGrid:
+    """A field carried by a `GridField` in its `grid` (snapshots of it, or exact values at
+    points prepared within it): the grid's resolution and spacing are the field's."""
+
+    @property
+    def resolution(self) -> float | None:
+        """The grid's resolution (m): probe nodes are chosen for it, as for the grid alone."""
+        return self.grid.resolution
+
+    def spacing_at(self, points):
+        """The grid's spacing (m) at `points` (`GridField.spacing_at`)."""
+        return self.grid.spacing_at(points)
+
+
+class SnapshotField(OnGrid, AbstractField):
     """Snapshots of an unsteady flow (LES, URANS) on one grid: trilinear in space, linear in
     time between consecutive snapshots, NaN outside their span.
 
@@ -861,14 +875,6 @@ class SnapshotField(AbstractField):
         self.grid = eqx.tree_at(lambda g: g.velocity, first,
                                 jnp.stack([f.velocity for f in fields]))
         self.times = jnp.asarray(times if t is None else t, first.dtype)
-
-    @property
-    def resolution(self) -> float | None:
-        return self.grid.resolution
-
-    def spacing_at(self, points):
-        """The snapshots' grid spacing at `points` (`GridField.spacing_at`)."""
-        return self.grid.spacing_at(points)
 
     @property
     def time_span(self):

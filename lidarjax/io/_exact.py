@@ -28,6 +28,7 @@ from ..field import (
     AbstractField,
     GridField,
     IndexedPoints,
+    OnGrid,
     PointIndex,
     SnapshotField,
     _lerp_in_time,
@@ -153,7 +154,7 @@ class _Prepared(IndexedPoints):
         return self.tets.index
 
 
-class CellPointField(_Prepared, AbstractField):
+class CellPointField(OnGrid, _Prepared, AbstractField):
     """A graded `GridField` made exact at prepared points by the mesh's own cellPoint tets.
 
     **Arguments:**
@@ -195,15 +196,6 @@ class CellPointField(_Prepared, AbstractField):
         self.grid, self.tets = grid, tets
         self.origin, self.origin_lo = grid.origin, grid.origin_lo
         self.values, self.found = tets.check_values(values, (), "CellPointField")
-
-    @property
-    def resolution(self) -> float | None:
-        """The grid's resolution (m): probe nodes are chosen for it, as for the grid alone."""
-        return self.grid.resolution
-
-    def spacing_at(self, points):
-        """The grid's spacing at `points` (`GridField.spacing_at`)."""
-        return self.grid.spacing_at(points)
 
     @property
     def nbytes(self) -> int:

@@ -454,16 +454,9 @@ def resample_openfoam(
     return axes, velocity, info
 
 
-def resample_with_sampler(
-    of: OpenFOAMField,
-    region: tuple[Any, Any] | None,
-    spacing: float | Sequence[float] | None = None,
-    *,
-    resolution: float = DEFAULT_RESOLUTION,
-    max_nodes: int = DEFAULT_MAX_NODES,
-    check_points: int = 2000,
-    seed: int = 0,
-) -> tuple[list[np.ndarray], np.ndarray, dict[str, Any], CellPointSampler]:
+def resample_with_sampler(of: OpenFOAMField, region, spacing=None, *, resolution=DEFAULT_RESOLUTION,
+                          max_nodes=DEFAULT_MAX_NODES, check_points=2000, seed=0
+                          ) -> tuple[list[np.ndarray], np.ndarray, dict[str, Any], CellPointSampler]:
     """`resample_openfoam`, also returning the cellPoint sampler over the cells the grid
     covers (to prepare exact points there without building it twice:
     `lidarjax.io._exact.cellpoint_field`)."""
