@@ -145,3 +145,19 @@ def test_welch_coherence_in_mann_boxes_is_the_mann_coherence(mann_run):
     lo, hi = lc.coherence_band(np.asarray(lc.lac_spectra(samples, rotor, slow, f).coherence)[sel], n,
                                n_bins=int(sel.sum()))
     assert not np.all((lo <= c[sel]) & (c[sel] <= hi))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(alphaepsilon=None), "exactly one of alphaepsilon"),
+    (dict(sigma_u=1.0), "exactly one of alphaepsilon"),
+    (dict(n_nodes=3), "n_nodes must be an integer >= 4"),
+    (dict(box=(8, 8)), "box \\(ny, nz\\) and box_spacing"),
+    (dict(box=(8,), box_spacing=(4.0, 4.0)), "box must be \\(ny, nz\\)"),
+    (dict(box=(8, 8), box_spacing=(4.0, 4.0, 4.0)), "box_spacing must be \\(dy, dz\\)"),
+    (dict(length_scale=-1.0), "length_scale"),
+])
+def test_bad_input_is_refused_in_one_line(kwargs, match):
+    args = dict(alphaepsilon=AE, length_scale=L, gamma=3.9) | kwargs
+    with pytest.raises(ValueError, match=match):
+        lc.MannInflow(U, **args)
+    assert lc.MannInflow(U, sigma_u=1.5, length_scale=L, gamma=3.9).alphaepsilon > 0  # sigma_u alone

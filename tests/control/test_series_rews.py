@@ -133,3 +133,11 @@ def test_bad_input():
         lc.series_rews(series, lj.nacelle_2beam(), nacelle_mount(), hub=HUB, yaw=YAW, field=lj.scenes.uniform())
     with pytest.raises(ValueError, match="`update`"):
         lc.series_rews(series, lj.nacelle_2beam(), nacelle_mount(), hub=HUB, yaw=YAW, update="sometimes")
+    with pytest.raises(ValueError, match="Series or ScanResult"):
+        lc.series_rews(np.zeros((4, 2)), hub=HUB, yaw=YAW)
+    with pytest.raises(ValueError, match="`hub` must be"):
+        lc.series_rews(series, lj.nacelle_2beam(), nacelle_mount(), hub=[0.0, 0.0], yaw=YAW)
+    with pytest.raises(ValueError, match="is a batch"):
+        lc.series_rews(series, lj.nacelle_2beam(), lj.Mount(np.zeros((2, 3)), pitch=-90.0), hub=HUB, yaw=YAW)
+    with pytest.raises(ValueError, match="`schedule` must be"):
+        lc.series_rews(series, lj.nacelle_2beam(), nacelle_mount(), hub=HUB, yaw=YAW, schedule="1 Hz")

@@ -12,6 +12,7 @@ import pytest
 import scipy.io
 from scipy import integrate
 
+import lidarjax as lj
 from lidarjax import control as lc
 from lidarjax.control import spectra as spectra_module
 
@@ -215,6 +216,27 @@ def test_bad_input_is_refused():
         lc.rotor_disc(-1.0)
     with pytest.raises(ValueError, match="turbulence_intensity"):
         lc.KaimalInflow(10.0, 0.0)
+    with pytest.raises(ValueError, match="must be a scalar"):
+        lc.KaimalInflow([10.0, 11.0], 0.1)
+    with pytest.raises(ValueError, match="turbulence_class='D'"):
+        lc.iec_turbulence_intensity(10.0, "D")
+    with pytest.raises(ValueError, match="at most the radius"):
+        lc.rotor_disc(10.0, spacing=20.0)
+    with pytest.raises(ValueError, match="finite non-negative weights"):
+        lc.rotor_disc(10.0, spacing=5.0, weighting=lambda r: -r)
+    with pytest.raises(ValueError, match="n_points must be a positive integer"):
+        lc.cone_points(100.0, 20.0, 0)
+    focus = np.array([[100.0, 10.0, 0.0], [100.0, -10.0, 0.0]])
+    with pytest.raises(ValueError, match="not both"):
+        lc.lidar_samples(focus, probe=lj.CWProbe(), offsets=[0.0])
+    with pytest.raises(ValueError, match="offset_weights needs offsets"):
+        lc.lidar_samples(focus, offset_weights=[1.0])
+    with pytest.raises(ValueError, match="of one length"):
+        lc.lidar_samples(focus, offsets=[0.0, 1.0], offset_weights=[1.0])
+    with pytest.raises(ValueError, match="one per focus point"):
+        lc.lidar_samples(focus, times=[0.0])
+    with pytest.raises(ValueError, match="KaimalInflow or a MannInflow"):
+        lc.lac_spectra(lc.lidar_samples(focus), lc.rotor_disc(10.0, spacing=5.0), "IEC", np.array([0.1, 0.2]))
     with pytest.raises(ValueError, match="frequency"):
         lc.lac_spectra(lc.lidar_samples(np.ones((1, 3))), lc.rotor_disc(10.0, spacing=5.0),
                        lc.KaimalInflow(10.0, 0.1), np.array([-1.0, 1.0]))

@@ -103,3 +103,22 @@ def test_zephir_missing_code_last_is_whole(tmp_path):
     path = tmp_path / "code.csv"
     path.write_text(head + ",9999")
     assert _quiet(read_zephir_csv, path).time.shape == (4,)
+
+
+def test_field_cut_rules():
+    """The rule itself: another number format than the column's, a beginning of the column's
+    text, or a text where the column holds numbers is cut; the column's own format or text,
+    a missing code, or a column without numbers is written."""
+    from lidarjax.io._common import field_cut, number_format
+
+    assert number_format(" 1,50e-03 ") == (2, 2) and number_format("12") == (0, 0)
+    assert number_format("NaN") is None and number_format("1.2.3") is None
+    assert "has 0 decimals" in field_cut("10", ["100.00", "99.50"])
+    assert field_cut("99.75", ["100.00", "99.50"]) is None
+    assert field_cut("9999", ["12.5"], missing=lambda f: f.strip() == "9999") is None
+    assert field_cut("12.5", ["9999", "9999"], missing=lambda f: f.strip() == "9999") is None
+    assert "is not the column's number" in field_cut("Na", ["NaN", "NaN"])
+    assert "is not the column's number" in field_cut("ab", ["12.5", "13.0"])
+    assert field_cut("NaN", ["NaN", "12.5"]) is None
+    assert field_cut("OK", ["FAIL", "OK"]) is None
+    assert field_cut("xyz", ["abc"]) is None
