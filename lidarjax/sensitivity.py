@@ -667,7 +667,11 @@ def _with_inverse(table, value, jac, inv_outputs):
     los = value["los"]
     # d(inverse)/d(LOS) at the nominal LOS: implicit gradients of `invert`, with its values
     # (one trace of the solver)
-    g_all, inv_val = jax.jacfwd(lambda x: (lambda r: (r, r))(inv(x)), has_aux=True)(los)  # (h,)+(h, b)
+    def value_twice(x):  # the Jacobian's output and, as its aux, the value
+        r = inv(x)
+        return r, r
+
+    g_all, inv_val = jax.jacfwd(value_twice, has_aux=True)(los)  # (h,)+(h, b)
     h_idx = jnp.arange(los.shape[0])
     j_los = jnp.where(jnp.isfinite(jac["los"]), jac["los"], 0.0)
     for o in inv_outputs:
