@@ -21,6 +21,7 @@ The package's ``__init__`` files are facades (re-exports) and stand outside the 
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -78,52 +79,59 @@ def _known(name: str) -> str | None:
     return None
 
 
-def _imports():
-    """(importer, imported module, line, inside a function) for every lidarjax import."""
+class _ImportLister(ast.NodeVisitor):
+    """(importer, is a package's __init__, imported module, line, inside a function) for every
+    import of one module, in one walk that tracks the enclosing function."""
+
+    def __init__(self, module: str, is_init: bool):
+        self.module, self.is_init, self.depth, self.found = module, is_init, 0, []
+
+    def _function(self, node):
+        self.depth += 1
+        self.generic_visit(node)
+        self.depth -= 1
+
+    visit_FunctionDef = visit_AsyncFunctionDef = _function
+
+    def _add(self, node, targets):
+        self.found += [(self.module, self.is_init, t, node.lineno, self.depth > 0) for t in targets]
+
+    def visit_Import(self, node):
+        self._add(node, [a.name for a in node.names])
+
+    def visit_ImportFrom(self, node):
+        base = _resolve(node, self.module, self.is_init)
+        self._add(node, [f"{base}.{a.name}" for a in node.names] if base.startswith("lidarjax")
+                  else [base])
+
+
+@functools.cache
+def imports():
+    """(importer, is an __init__, imported module, line, inside a function) for every import in
+    lidarjax; parsed once, when the first test here needs it (not at collection)."""
     out = []
     for module, path, is_init in _modules():
-        tree = ast.parse(path.read_text())
-        parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
-
-        def in_function(node, parents=parents):
-            while node in parents:
-                node = parents[node]
-                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                    return True
-            return False
-
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom):
-                base = _resolve(node, module, is_init)
-                targets = [f"{base}.{a.name}" for a in node.names] if base.startswith("lidarjax") \
-                    else [base]
-            elif isinstance(node, ast.Import):
-                targets = [a.name for a in node.names]
-            else:
-                continue
-            for t in targets:
-                out.append((module, is_init, t, node.lineno, in_function(node)))
+        lister = _ImportLister(module, is_init)
+        lister.visit(ast.parse(path.read_text()))
+        out += lister.found
     return out
 
 
-IMPORTS = _imports()
-
-
 def test_internal_imports_all_at_module_top():
-    inner = [f"{m}:{line} imports {t}" for m, _, t, line, f in IMPORTS
+    inner = [f"{m}:{line} imports {t}" for m, _, t, line, f in imports()
              if f and t.split(".")[0] == "lidarjax"]
     assert not inner, "imports inside functions hide the dependency direction:\n" + "\n".join(inner)
 
 
 def test_external_imports_in_functions_only_for_optional_extras():
-    inner = [f"{m}:{line} imports {t}" for m, _, t, line, f in IMPORTS
+    inner = [f"{m}:{line} imports {t}" for m, _, t, line, f in imports()
              if f and t.split(".")[0] != "lidarjax" and t.split(".")[0] not in OPTIONAL]
     assert not inner, "\n".join(inner)
 
 
 def test_layers_import_only_downwards():
     bad = []
-    for m, is_init, t, line, _ in IMPORTS:
+    for m, is_init, t, line, _ in imports():
         if is_init or not t.startswith("lidarjax"):
             continue
         target = _known(t)
@@ -139,14 +147,14 @@ def test_layers_import_only_downwards():
 
 
 def test_core_never_imports_io_workflows_cli_or_plots():
-    bad = [f"{m} imports {t}" for m, is_init, t, _, _ in IMPORTS
+    bad = [f"{m} imports {t}" for m, is_init, t, _, _ in imports()
            if not is_init and layer(m) <= 1 and re.match(r"lidarjax\.(io|workflows|cli|plots)\b", t)]
     assert not bad, "\n".join(bad)
 
 
 def test_no_two_modules_import_each_other():
     edges = {}
-    for m, is_init, t, _, _ in IMPORTS:
+    for m, is_init, t, _, _ in imports():
         target = _known(t) if t.startswith("lidarjax") else None
         if target and target != m and not is_init:
             edges.setdefault(m, set()).add(target)
@@ -157,7 +165,7 @@ def test_no_two_modules_import_each_other():
 
 def test_the_layering_rule_is_not_vacuous():
     """The walker sees the imports it judges (a refactor that hid them would pass silently)."""
-    seen = {(m, _known(t)) for m, _, t, _, _ in IMPORTS if t.startswith("lidarjax")}
+    seen = {(m, _known(t)) for m, _, t, _, _ in imports() if t.startswith("lidarjax")}
     assert ("lidarjax.forward", "lidarjax.field") in seen
     assert ("lidarjax.workflows.records", "lidarjax.inverse") in seen
     assert ("lidarjax.io.tables", "lidarjax.response") in seen
