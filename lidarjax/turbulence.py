@@ -43,6 +43,7 @@ from __future__ import annotations
 import functools
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -110,7 +111,7 @@ class TurbulenceBox(eqx.Module):
                 raise ValueError(
                     f"TurbulenceBox: need at least 2 nodes along non-periodic {name}, got {n}."
                 )
-        if is_concrete(velocity) and not bool(jnp.all(jnp.isfinite(velocity))):
+        if is_concrete(velocity) and not bool(_all_finite(velocity)):
             raise ValueError("TurbulenceBox: velocity contains NaN or inf.")
         if is_concrete(spacing):
             s = np.asarray(spacing, dtype=np.float64)
@@ -217,6 +218,12 @@ def box_axis(s, n: int, periodic: bool):
     return i0, i0 + 1, frac, ok
 
 
+
+
+@jax.jit
+def _all_finite(values):
+    """Whether every value is finite: one compiled program per box shape (two eagerly)."""
+    return jnp.all(jnp.isfinite(values))
 
 
 def mann_spectrum_level(sigma_u: float, length_scale: float, gamma: float = 3.9) -> float:
