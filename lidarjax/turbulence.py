@@ -40,7 +40,10 @@ sqrt(2F1(1/3, 17/6; 4/3; -(kL)^-2))``. Units: wavenumbers in rad/m, ``alphaepsil
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -108,7 +111,7 @@ class TurbulenceBox(eqx.Module):
                 raise ValueError(
                     f"TurbulenceBox: need at least 2 nodes along non-periodic {name}, got {n}."
                 )
-        if is_concrete(velocity) and not bool(jnp.all(jnp.isfinite(velocity))):
+        if is_concrete(velocity) and not bool(_all_finite(velocity)):
             raise ValueError("TurbulenceBox: velocity contains NaN or inf.")
         if is_concrete(spacing):
             s = np.asarray(spacing, dtype=np.float64)
@@ -217,17 +220,31 @@ def box_axis(s, n: int, periodic: bool):
 
 
 
+@jax.jit
+def _all_finite(values):
+    """Whether every value is finite: one compiled program per box shape (two eagerly)."""
+    return jnp.all(jnp.isfinite(values))
+
+
 def mann_spectrum_level(sigma_u: float, length_scale: float, gamma: float = 3.9) -> float:
     """``alpha eps^(2/3)`` (m^(4/3)/s^2) giving an infinite-domain ``sigma_u`` (m/s) for Mann's
     model with `length_scale` L (m) and `gamma`, by the isotropic relation
     ``sigma_iso^2 = 0.6883 alpha eps^(2/3) L^(2/3)`` scaled by the shear's ``sigma_u^2 /
     sigma_iso^2`` (about 1.9 at gamma 3.9, computed here by quadrature). Use it to set a target
     turbulence level; a finite box holds less variance (its largest scales are missing)."""
+    return float(sigma_u**2 / _u_variance_per_level(float(length_scale), float(gamma)))
+
+
+@functools.lru_cache(maxsize=64)
+def _u_variance_per_level(length_scale: float, gamma: float) -> float:
+    """The infinite-domain ``sigma_u^2`` (m^2/s^2) per unit ``alpha eps^(2/3)`` of Mann's model
+    (`mann_spectrum_level`); 1.6 million tensor evaluations (2.5 s) for a shear, so remembered
+    per ``(L, gamma)``."""
     k = np.logspace(-4, 3, 4000) / length_scale
     e = length_scale ** (5 / 3) * (k * length_scale) ** 4 / (1 + (k * length_scale) ** 2) ** (17 / 6)
     iso = np.trapezoid(e, k) * 2 / 3  # sigma^2 per component per unit alpha eps^(2/3)
     if gamma <= 0:
-        return float(sigma_u**2 / iso)
+        return float(iso)
     # sheared u variance by Monte-Carlo-free quadrature of Phi_11 on a spherical grid
     kk = np.logspace(-3, 2.5, 220) / length_scale
     th = np.linspace(0, np.pi, 61)
@@ -237,9 +254,8 @@ def mann_spectrum_level(sigma_u: float, length_scale: float, gamma: float = 3.9)
     c = _amplitude(k1, k2, k3, 1.0, length_scale, gamma)
     phi11 = np.sum(np.abs(c[..., 0, :]) ** 2, axis=-1)
     integrand = phi11 * K**2 * np.sin(T)
-    var = np.trapezoid(np.trapezoid(np.sum(integrand, axis=2) * (2 * np.pi / ph.size), th, axis=1),
-                       kk)
-    return float(sigma_u**2 / var)
+    return float(np.trapezoid(np.trapezoid(np.sum(integrand, axis=2) * (2 * np.pi / ph.size), th,
+                                           axis=1), kk))
 
 
 def _amplitude(k1, k2, k3, ae, L, gamma):

@@ -140,20 +140,36 @@ def cone_points(distance: Float[ArrayLike, ""], half_cone: Float[ArrayLike, ""],
 
 def _range_nodes(probe, offsets, offset_weights, ranges, dtype):
     if probe is not None:
-        if offsets is not None or offset_weights is not None:
-            raise ValueError("lidar_samples: give either probe or offsets/offset_weights, not both")
         o, w = probe.nodes(ranges)
         return o.astype(dtype), w.astype(dtype)
     if offsets is None:
-        if offset_weights is not None:
-            raise ValueError("lidar_samples: offset_weights needs offsets")
         return jnp.zeros(ranges.shape + (1,), dtype), jnp.ones(ranges.shape + (1,), dtype)
-    o = jnp.asarray(offsets, dtype)
-    w = jnp.ones_like(o) if offset_weights is None else jnp.asarray(offset_weights, dtype)
-    if o.ndim != 1 or w.shape != o.shape:
-        raise ValueError(f"lidar_samples: offsets and offset_weights must be 1-D of one length, got "
-                         f"{o.shape} and {w.shape}")
+    o = offsets.astype(dtype)
+    w = jnp.ones_like(o) if offset_weights is None else offset_weights.astype(dtype)
     return jnp.broadcast_to(o, ranges.shape + o.shape), jnp.broadcast_to(w, ranges.shape + o.shape)
+
+
+def _check_samples(fp, probe, offsets, offset_weights, times):
+    """`lidar_samples`' ValueErrors, from the shapes alone (before anything compiles)."""
+    if fp.ndim != 2 or fp.shape[1] != 3:
+        raise ValueError(f"lidar_samples: focus_points must be (b, 3) metres, got shape {fp.shape}")
+    if probe is not None and (offsets is not None or offset_weights is not None):
+        raise ValueError("lidar_samples: give either probe or offsets/offset_weights, not both")
+    if offsets is None and offset_weights is not None:
+        raise ValueError("lidar_samples: offset_weights needs offsets")
+    if offsets is not None:
+        o_shape = np.shape(offsets)
+        w_shape = o_shape if offset_weights is None else np.shape(offset_weights)
+        if len(o_shape) != 1 or w_shape != o_shape:
+            raise ValueError(f"lidar_samples: offsets and offset_weights must be 1-D of one length, "
+                             f"got {o_shape} and {w_shape}")
+    if times is not None and np.shape(times) != (fp.shape[0],):
+        raise ValueError(f"lidar_samples: times must be one per focus point ({fp.shape[0]},), "
+                         f"got {np.shape(times)}")
+
+
+def _asarray(x):
+    return None if x is None else jnp.asarray(x)
 
 
 def lidar_samples(focus_points: Float[ArrayLike, "b 3"], *,
@@ -182,22 +198,25 @@ def lidar_samples(focus_points: Float[ArrayLike, "b 3"], *,
     """
     fp = jnp.asarray(focus_points)
     dtype = fp.dtype if jnp.issubdtype(fp.dtype, jnp.floating) else default_float()
-    fp = fp.astype(dtype)
-    if fp.ndim != 2 or fp.shape[1] != 3:
-        raise ValueError(f"lidar_samples: focus_points must be (b, 3) metres, got shape {fp.shape}")
-    rel = fp - jnp.asarray(lidar_position, dtype)
+    _check_samples(fp, probe, offsets, offset_weights, times)
+    return _samples(fp, jnp.asarray(lidar_position), probe, _asarray(offsets),
+                    _asarray(offset_weights), _asarray(times), np.dtype(dtype))
+
+
+@eqx.filter_jit
+def _samples(fp, lidar_position, probe, offsets, offset_weights, times, dtype):
+    """`lidar_samples` in one compiled program (checked inputs)."""
+    fp, position = fp.astype(dtype), lidar_position.astype(dtype)
+    rel = fp - position
     rng = safe_sqrt(jnp.sum(rel**2, axis=1))
     n = rel / rng[:, None]
     o, w = _range_nodes(probe, offsets, offset_weights, rng, dtype)
     w = w / jnp.sum(w, axis=1, keepdims=True) / fp.shape[0]
-    pts = jnp.asarray(lidar_position, dtype) + (rng[:, None] + o)[..., None] * n[:, None, :]
+    pts = position + (rng[:, None] + o)[..., None] * n[:, None, :]
     if times is None:
         delay = jnp.zeros(fp.shape[0], dtype)
     else:
-        t = jnp.asarray(times, dtype)
-        if t.shape != (fp.shape[0],):
-            raise ValueError(f"lidar_samples: times must be one per focus point ({fp.shape[0]},), "
-                             f"got {t.shape}")
+        t = times.astype(dtype)
         delay = jnp.max(t) - t
     q = o.shape[1]
     return LidarSamples(points=pts.reshape(-1, 3), directions=jnp.repeat(n, q, axis=0),

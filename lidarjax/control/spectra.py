@@ -151,7 +151,7 @@ def _symmetry_classes(samples, rotor):
     nothing repeats."""
     if not rotor.symmetric or not is_concrete(samples.points):
         return None
-    canon = np.sort(np.abs(np.asarray(samples.points[:, 1:], np.float64)), axis=1)
+    canon = np.sort(np.abs(np.asarray(samples.points, np.float64)[:, 1:]), axis=1)
     _, rep, inverse = np.unique(np.round(canon, 9), axis=0, return_index=True, return_inverse=True)
     if rep.size == canon.shape[0]:
         return None

@@ -47,28 +47,37 @@ F32 = np.dtype(np.float32)
 
 
 # -- the emulated fusing compiler --------------------------------------------------------------
+@jax.jit
 def fma32(x, y, z):
     """``x * y + z`` for float32 arrays with ONE rounding (an exact FMA): the product is exact
     in float64, the sum is rounded to odd in float64 (nearest plus a sticky last bit, from the
     exact two-sum error), and rounding that to float32 is then the correctly rounded result
-    (Boldo and Melquiond 2008: 53 >= 2 * 24 + 2)."""
-    x, y, z = np.broadcast_arrays(*(np.asarray(v, np.float64) for v in (x, y, z)))
+    (Boldo and Melquiond 2008: 53 >= 2 * 24 + 2). Every float64 step is exact or rounded once
+    whether or not a compiler contracts it (the product of two float32 is exact); the sticky
+    bit is one step of the bit pattern (the sum is not 0 where the error is not). Operands and
+    result pass optimization barriers: XLA's CPU loop fusion recomputes a fused operand at each
+    use, and the sum here has five (the emulated frozen-turbulence sampler compiled in 6.3 s
+    without them, 1.1 s with); ``nextafter`` for the step made the emulated forward model
+    compile in 5.5 s instead of 2.9 s (1.6 s not emulated)."""
+    x, y, z = jax.lax.optimization_barrier(
+        jnp.broadcast_arrays(*(jnp.asarray(v, jnp.float64) for v in (x, y, z))))
     p = x * y
-    with np.errstate(invalid="ignore", over="ignore"):
-        s = p + z
-        bb = s - p
-        err = (p - (s - bb)) + (z - bb)
-        odd = np.where((err != 0) & (s.view(np.int64) & 1 == 0) & np.isfinite(s),
-                       np.nextafter(s, np.where(err > 0, np.inf, -np.inf)), s)
-    return odd.astype(np.float32)
+    s = p + z
+    bb = s - p
+    err = (p - (s - bb)) + (z - bb)
+    bits = jax.lax.bitcast_convert_type(s, jnp.int64)
+    away = jax.lax.bitcast_convert_type(bits + jnp.where((err > 0) == (s > 0), 1, -1), jnp.float64)
+    odd = jnp.where((err != 0) & (bits & 1 == 0) & jnp.isfinite(s), away, s)
+    return jax.lax.optimization_barrier(odd.astype(jnp.float32))
 
 
+@jax.jit
 def tf32(x):
     """float32 values rounded to TensorFloat-32 (10 explicit mantissa bits, to nearest)."""
-    x = np.ascontiguousarray(x, np.float32)
-    u = x.view(np.uint32)
-    r = ((u + np.uint32(0x1000)) & np.uint32(0xFFFFE000)).view(np.float32)
-    return np.where(np.isfinite(x), r, x)
+    x = jnp.asarray(x, jnp.float32)
+    u = jax.lax.bitcast_convert_type(x, jnp.uint32)
+    r = jax.lax.bitcast_convert_type((u + jnp.uint32(0x1000)) & jnp.uint32(0xFFFFE000), jnp.float32)
+    return jnp.where(jnp.isfinite(x), r, x)
 
 
 _CALLS = {"pjit", "jit", "closed_call", "core_call", "remat", "checkpoint", "custom_jvp_call",
@@ -121,16 +130,16 @@ def _eval(jaxpr, consts, args, fma, tf32_dots, excess):
         elif (name == "dot_general" and tf32_dots and _default_precision(eqn.params)
               and all(_is_f32(v.aval) for v in eqn.invars)):
             params = dict(eqn.params, precision=jax.lax.Precision.HIGHEST)
-            out = [eqn.primitive.bind(*(jnp.asarray(tf32(x)) for x in invals), **params)]
+            out = [eqn.primitive.bind(*(tf32(x) for x in invals), **params)]
         elif name in ("add", "sub") and fma and _is_f32(eqn.outvars[0].aval):
             a, b = eqn.invars
             pa = None if isinstance(a, jcore.Literal) else product.get(a)
             pb = None if isinstance(b, jcore.Literal) else product.get(b)
             sign = 1.0 if name == "add" else -1.0
             if pa is not None:  # x y + b or x y - b
-                out = [jnp.asarray(fma32(pa[0], pa[1], sign * np.asarray(invals[1], F32)))]
+                out = [fma32(pa[0], pa[1], sign * jnp.asarray(invals[1], F32))]
             elif pb is not None:  # a + x y or a - x y
-                out = [jnp.asarray(fma32(sign * np.asarray(pb[0], F32), pb[1], invals[0]))]
+                out = [fma32(sign * jnp.asarray(pb[0], F32), pb[1], invals[0])]
         elif name == "convert_element_type" and excess and _is_float(eqn.outvars[0].aval):
             a = eqn.invars[0]
             if not isinstance(a, jcore.Literal) and a in converted:  # A -> B -> C is A -> C
@@ -145,27 +154,32 @@ def _eval(jaxpr, consts, args, fma, tf32_dots, excess):
         for v, val in zip(eqn.outvars, out, strict=True):
             env[v] = val
         if fma and name == "mul" and _is_f32(eqn.outvars[0].aval):
-            product[eqn.outvars[0]] = tuple(np.asarray(x, F32) for x in invals)
+            product[eqn.outvars[0]] = tuple(jnp.asarray(x, F32) for x in invals)
         elif fma and name in _LAYOUT and not isinstance(eqn.invars[0], jcore.Literal) \
                 and eqn.invars[0] in product:
-            product[eqn.outvars[0]] = tuple(
-                np.asarray(eqn.primitive.bind(jnp.asarray(x), *invals[1:], **eqn.params))
-                for x in product[eqn.invars[0]])
+            product[eqn.outvars[0]] = tuple(eqn.primitive.bind(x, *invals[1:], **eqn.params)
+                                            for x in product[eqn.invars[0]])
     return [read(v) for v in jaxpr.outvars]
 
 
-def fusing(fn, *, fma=True, tf32_dots=True, excess=True):
+def fusing(fn, *, fma=True, tf32_dots=True, excess=True, one_program=True):
     """`fn` evaluated as XLA on a GPU runs it: products feeding sums contracted into exact
     FMAs (`fma`), float32 dots at DEFAULT precision in TF32 (`tf32_dots`) and chains of float
     conversions ``A -> B -> C`` replaced by ``A -> C`` (`excess`: ``SimplifyFPConversions``,
     on with the default ``xla_allow_excess_precision``; it makes ``float64 -> float32 ->
     float64`` a no-op). Nested jit and custom-derivative calls are evaluated inside (loops and
-    conditionals are run as they are)."""
+    conditionals are run as they are). The emulation is traced into one compiled program
+    (`one_program`; the same operations with the FMAs, TF32 roundings and collapsed conversions
+    spelt out), or dispatched operation by operation, each compiled on its own (hundreds of
+    small programs; for the time sampler's lines, whose emulated program takes XLA's CPU
+    compiler 6 s, longer than dispatching its operations)."""
 
     def run(*args):
         closed, shape = jax.make_jaxpr(fn, return_shape=True)(*args)
         flat = jax.tree_util.tree_leaves(args)
-        out = _eval(closed.jaxpr, closed.consts, flat, fma, tf32_dots, excess)
+        emulate = lambda consts, flat: _eval(closed.jaxpr, consts, flat, fma, tf32_dots,  # noqa: E731
+                                             excess)
+        out = (jax.jit(emulate) if one_program else emulate)(closed.consts, flat)
         return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(shape), out)
 
     return run
@@ -277,13 +291,14 @@ def test_frozen_turbulence_float32_long_advection_under_fusion():
     want = np.asarray(sample_at(f64, jnp.asarray(pts, jnp.float64), jnp.asarray(ts, jnp.float64)))
     direct = fusing(lambda t: f32.sample_local_at(jnp.asarray(pts), t))(jnp.asarray(ts))
     np.testing.assert_allclose(np.asarray(direct), want, atol=2e-5)
-    lines = fusing(lambda t: f32.time_sampler(jnp.asarray(pts), n_times=1000)(t))(jnp.asarray(ts))
+    lines = fusing(lambda t: f32.time_sampler(jnp.asarray(pts), n_times=1000)(t),
+                   one_program=False)(jnp.asarray(ts))
     np.testing.assert_allclose(np.asarray(lines), want, atol=2e-5)
     assert np.asarray(lines).dtype == np.float32
     want_los = _sampler_values(f64, jnp.asarray(pts, jnp.float64), jnp.asarray([0.3, -0.2, 0.9]),
                                jnp.asarray(ts, jnp.float64), 1000)
     los = fusing(lambda t: f32.time_sampler(jnp.asarray(pts), jnp.float32([0.3, -0.2, 0.9]),
-                                            n_times=1000)(t))(jnp.asarray(ts))
+                                            n_times=1000)(t), one_program=False)(jnp.asarray(ts))
     np.testing.assert_allclose(np.asarray(los), np.asarray(want_los), atol=2e-5)
 
 
