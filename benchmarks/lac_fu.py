@@ -192,12 +192,12 @@ def write_md(r):
                      f"{row['bandwidth_hz']:.4f} | {row['bandwidth_rad_m']:.4f} |")
     q = r.get("mann_quadrature_check")
     if q:
-        lo, hi = (q["nodes"][k] for k in sorted(q["nodes"], key=int))
-        lines += ["", f"Mann quadrature check (IEC case, radii {q['ratios']} R): bandwidths "
-                  f"{', '.join(f'{v:.5f}' for v in lo['bandwidth_hz'])} Hz with {min(map(int, q['nodes']))} "
-                  f"nodes per axis, {', '.join(f'{v:.5f}' for v in hi['bandwidth_hz'])} Hz with "
-                  f"{max(map(int, q['nodes']))}; parabola optimum {lo['radius_over_R']:.3f} R and "
-                  f"{hi['radius_over_R']:.3f} R."]
+        coarse, fine = sorted(q["nodes"], key=int)
+        bw = {k: ", ".join(f"{v:.5f}" for v in q["nodes"][k]["bandwidth_hz"]) for k in (coarse, fine)}
+        opt = {k: q["nodes"][k]["radius_over_R"] for k in (coarse, fine)}
+        lines += ["", f"Mann quadrature check (IEC case, radii {q['ratios']} R): bandwidths {bw[coarse]} Hz "
+                  f"with {coarse} nodes per axis, {bw[fine]} Hz with {fine}; parabola optimum "
+                  f"{opt[coarse]:.3f} R and {opt[fine]:.3f} R."]
     (OUT / "lac_fu.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
