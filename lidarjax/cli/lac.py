@@ -16,7 +16,7 @@ from .. import control as lc
 from .._util import import_optional
 from ..design import control as dc
 from ..probe import CWProbe, PulsedProbe
-from ._common import check_output_folder, positive_float, positive_int
+from ._common import check_output_folder, finite_float, positive_float, positive_int
 
 FILES = ("lac_spectra.csv", "lac_summary.json", "lac_coherence.png", "lac_disc.png")
 
@@ -25,7 +25,8 @@ def register(sub) -> None:
     p = sub.add_parser(
         "lac", help="lidar-assisted control: lidar–rotor coherence, filter and buffer time, scan design",
         description="The analytic spectra of the rotor-effective wind speed and of a lidar's estimate "
-                    "of it (IEC Kaimal turbulence with the IEC coherence, Task 52's model), their "
+                    "of it (IEC Kaimal turbulence with the IEC coherence, Task 52's model, or with "
+                    "--inflow mann the Mann (1994) spectral tensor of lidarjax's boxes), their "
                     "coherence and transfer function, the coherence bandwidth, the -3 dB cut-off of a "
                     "first-order feed-forward filter, its delay and the buffer time. With --design: "
                     "the half-cone angle (and gate length of a pulsed lidar) with the widest bandwidth.",
@@ -39,6 +40,20 @@ def register(sub) -> None:
                    help="IEC turbulence class (default B)")
     p.add_argument("--ti", type=positive_float, help="turbulence intensity sigma_u/U (overrides the class)")
     p.add_argument("--length-scale", type=positive_float, default=42.0, help="IEC Lambda_1, m (default 42)")
+    p.add_argument("--inflow", default="kaimal", choices=("kaimal", "mann"),
+                   help="turbulence model: IEC Kaimal spectra with the IEC coherence (Task 52's model), "
+                        "or the Mann spectral tensor, its level from --ti (or the class) unless "
+                        "--alphaepsilon (default kaimal)")
+    p.add_argument("--mann-length-scale", type=positive_float,
+                   help="Mann's L, m (default 0.7 Lambda_1: 29.4 m, IEC 61400-1 Annex C); --inflow mann only")
+    p.add_argument("--gamma", type=finite_float,
+                   help="Mann's shear anisotropy Gamma, >= 0 (default 3.9, IEC); --inflow mann only")
+    p.add_argument("--alphaepsilon", type=positive_float,
+                   help="Mann's spectral level alpha eps^(2/3), m^(4/3)/s^2 (default: the level whose "
+                        "sigma_u is --ti times the speed); --inflow mann only")
+    p.add_argument("--mann-nodes", type=positive_int,
+                   help="Gauss-Legendre nodes per lateral and vertical wavenumber axis, >= 4 (default 96; "
+                        "fewer is faster and coarser, see MannInflow); --inflow mann only")
     p.add_argument("--lidar", default="pulsed", choices=("pulsed", "cw"), help="range weighting")
     p.add_argument("--beams", type=positive_int, default=4, help="beams or scan points on the cone (default 4)")
     p.add_argument("--distance", type=positive_float, default=160.0, help="focus distance upstream, m")
@@ -63,8 +78,27 @@ def _inputs(args):
     ti = args.ti if args.ti is not None else float(lc.iec_turbulence_intensity(speed, args.turbulence_class))
     if args.nf < 2:
         raise ValueError("--nf must be at least 2 frequencies")
-    inflow = lc.KaimalInflow(speed, ti, args.length_scale)
-    return dc.Turbine(radius, turbine.hub_height, turbine.rated_speed), inflow
+    inflow = _mann(args, speed, ti) if args.inflow == "mann" else lc.KaimalInflow(speed, ti, args.length_scale)
+    level_ti = None if args.inflow == "mann" and args.alphaepsilon else ti
+    return dc.Turbine(radius, turbine.hub_height, turbine.rated_speed), inflow, level_ti
+
+
+#: the Mann-only options (argparse dest -> flag), refused with --inflow kaimal
+MANN_OPTIONS = {"mann_length_scale": "--mann-length-scale", "gamma": "--gamma",
+                "alphaepsilon": "--alphaepsilon", "mann_nodes": "--mann-nodes"}
+
+
+def _mann(args, speed, ti):
+    """The `MannInflow` of the arguments: IEC 61400-1 Annex C defaults (``L = 0.7 Lambda_1``,
+    ``Gamma = 3.9``), its level from ``sigma_u = ti U`` unless --alphaepsilon."""
+    if args.gamma is not None and not args.gamma >= 0:
+        raise ValueError(f"--gamma must be >= 0 (Mann's shear anisotropy; 0 is isotropic), got {args.gamma}")
+    if args.mann_nodes is not None and args.mann_nodes < 4:
+        raise ValueError(f"--mann-nodes must be at least 4, got {args.mann_nodes}")
+    length = args.mann_length_scale or 0.7 * args.length_scale
+    gamma = 3.9 if args.gamma is None else args.gamma
+    level = {"alphaepsilon": args.alphaepsilon} if args.alphaepsilon else {"sigma_u": ti * speed}
+    return lc.MannInflow(speed, length_scale=length, gamma=gamma, n_nodes=args.mann_nodes or 96, **level)
 
 
 def _design(args, turbine, inflow):
@@ -82,7 +116,11 @@ def _design(args, turbine, inflow):
 
 
 def run(args) -> int:
-    turbine, inflow = _inputs(args)
+    if args.inflow != "mann":
+        given = [flag for key, flag in MANN_OPTIONS.items() if getattr(args, key) is not None]
+        if given:
+            raise ValueError(f"{', '.join(given)}: only with --inflow mann")
+    turbine, inflow, ti = _inputs(args)
     out = check_output_folder(args.out, files=FILES) if args.out else None
     design = _design(args, turbine, inflow) if args.design else None
     probe = PulsedProbe(30.0, args.gate, n_nodes=11) if args.lidar == "pulsed" else CWProbe(n_nodes=11)
@@ -98,7 +136,7 @@ def run(args) -> int:
     t_buffer = float(lc.buffer_time(args.distance, float(inflow.mean_speed), scan_time=args.scan_time,
                                     filter_delay=t_filter, prediction_time=args.prediction_time))
     summary = {"radius_m": turbine.radius, "mean_speed_m_s": float(inflow.mean_speed),
-               "turbulence_intensity": float(inflow.turbulence_intensity), "lidar": args.lidar,
+               "turbulence_intensity": ti, **_inflow_summary(inflow), "lidar": args.lidar,
                "beams": args.beams, "distance_m": args.distance, "half_cone_deg": args.half_cone,
                "gate_m": args.gate if args.lidar == "pulsed" else None,
                "bandwidth_hz": f_b, "bandwidth_rad_m": k_b, "cutoff_rad_s": cutoff, "filter_delay_s": t_filter,
@@ -111,6 +149,14 @@ def run(args) -> int:
     if out is not None:
         _write(out, sp, summary, focus, turbine.radius)
     return 0
+
+
+def _inflow_summary(inflow):
+    if isinstance(inflow, lc.MannInflow):
+        return {"inflow": "mann", "alphaepsilon_m43_s2": float(inflow.alphaepsilon),
+                "mann_length_scale_m": float(inflow.length_scale), "gamma": float(inflow.gamma),
+                "mann_nodes": inflow.n_nodes}
+    return {"inflow": "kaimal", "kaimal_length_scale_m": float(inflow.length_scale)}
 
 
 def _write(out, sp, summary, focus, radius):

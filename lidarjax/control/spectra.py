@@ -134,14 +134,20 @@ def lac_spectra(samples: LidarSamples, rotor: RotorDisc, inflow: KaimalInflow | 
                          f"got shape {f.shape}")
     if isinstance(f, np.ndarray) and not np.all(f > 0):
         raise ValueError("lac_spectra: frequency must be positive (Hz)")
-    if isinstance(inflow, MannInflow):
-        f = jnp.asarray(f)
-        s_rr, s_ll, s_rl = _mann_spectra(samples, rotor, inflow, f)
-        return LacSpectra(frequency=f, S_RR=s_rr, S_LL=s_ll, S_RL=s_rl, mean_speed=inflow.mean_speed)
-    if not isinstance(inflow, KaimalInflow):
+    if not isinstance(inflow, KaimalInflow | MannInflow):
         raise ValueError(f"lac_spectra: inflow must be a KaimalInflow or a MannInflow, got "
                          f"{type(inflow).__name__}")
-    return _spectra(samples, rotor, inflow, jnp.asarray(f), _symmetry_classes(samples, rotor))
+    classes = None if isinstance(inflow, MannInflow) else _symmetry_classes(samples, rotor)
+    return _inflow_spectra(samples, rotor, inflow, jnp.asarray(f), classes)
+
+
+def _inflow_spectra(samples, rotor, inflow, frequency, classes=None):
+    """`lac_spectra` without its checks (also at one frequency, and traced): the Kaimal
+    model (`_spectra`) or the Mann tensor (`_mann_spectra`), chosen by the inflow's type."""
+    if isinstance(inflow, MannInflow):
+        s_rr, s_ll, s_rl = _mann_spectra(samples, rotor, inflow, frequency)
+        return LacSpectra(frequency=frequency, S_RR=s_rr, S_LL=s_ll, S_RL=s_rl, mean_speed=inflow.mean_speed)
+    return _spectra(samples, rotor, inflow, frequency, classes)
 
 
 def _symmetry_classes(samples, rotor):

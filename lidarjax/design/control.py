@@ -25,8 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..control import KaimalInflow, cone_points, lac_spectra, lidar_samples, rotor_disc
-from ..control.spectra import _spectra, coherence_bandwidth
+from ..control import KaimalInflow, MannInflow, cone_points, lac_spectra, lidar_samples, rotor_disc
+from ..control.spectra import _inflow_spectra, coherence_bandwidth
 from ..probe import CWProbe, PulsedProbe
 from . import _search
 
@@ -53,7 +53,7 @@ TURBINES = {"NREL5MW": Turbine(63.0, 90.0, 11.4), "IEA15MW": Turbine(120.0, 150.
 
 class _Problem(eqx.Module):
     rotor: object
-    inflow: KaimalInflow
+    inflow: KaimalInflow | MannInflow
     frequency: jax.Array
     probe: object
     fixed: jax.Array  # (3,) values of the fixed variables (distance, half_cone, gate_length)
@@ -84,7 +84,7 @@ def _exact_bandwidth(pb, samples, f_grid):
     grid's linear interpolation has a gradient that jumps between grid cells."""
 
     def excess(f):
-        return _spectra(samples, pb.rotor, pb.inflow, jnp.reshape(f, (1,))).coherence[0] - 0.5
+        return _inflow_spectra(samples, pb.rotor, pb.inflow, jnp.reshape(f, (1,))).coherence[0] - 0.5
 
     def newton(f):
         g, dg = jax.jvp(excess, (f,), (jnp.ones_like(f),))
@@ -134,6 +134,9 @@ def _problem(turbine, inflow, *, n_points, distance, half_cone, gate_length, lid
             raise ValueError(f"design_lac_scan: turbine={turbine!r} is not one of {sorted(TURBINES)} "
                              "(or give a Turbine)")
         turbine = TURBINES[turbine]
+    if not isinstance(inflow, KaimalInflow | MannInflow):
+        raise ValueError(f"design_lac_scan: inflow must be a KaimalInflow or a MannInflow, got "
+                         f"{type(inflow).__name__}")
     if lidar not in ("pulsed", "cw"):
         raise ValueError(f"design_lac_scan: lidar={lidar!r} must be 'pulsed' or 'cw'")
     spec = {"distance": distance, "half_cone": half_cone, "gate_length": gate_length}
@@ -166,7 +169,7 @@ def _problem(turbine, inflow, *, n_points, distance, half_cone, gate_length, lid
     return pb, names, jnp.asarray(lo), jnp.asarray(hi)
 
 
-def lac_objective(turbine, inflow: KaimalInflow, x, *, n_points: int = 4, distance=(50.0, 300.0),
+def lac_objective(turbine, inflow: KaimalInflow | MannInflow, x, *, n_points: int = 4, distance=(50.0, 300.0),
                   half_cone=(5.0, 40.0), gate_length=30.0, lidar: str = "pulsed", frequency=None,
                   spacing: float = 10.0, objective: str = "bandwidth"):
     """The objective of `design_lac_scan` (same arguments) at variables `x` ``(m, d)`` (the
@@ -186,7 +189,7 @@ def _objective_map(pb, x):
     return jax.lax.map(lambda xi: _objective(pb, xi)[::2], x)
 
 
-def design_lac_scan(turbine, inflow: KaimalInflow, *, n_points: Sequence[int] = (4,),
+def design_lac_scan(turbine, inflow: KaimalInflow | MannInflow, *, n_points: Sequence[int] = (4,),
                     distance=(50.0, 300.0), half_cone=(5.0, 40.0), gate_length=30.0, lidar: str = "pulsed",
                     frequency=None, spacing: float = 10.0, objective: str = "bandwidth",
                     n_coarse: int = 9, n_starts: int = 2, max_steps: int = 15) -> LacDesign:
@@ -196,7 +199,9 @@ def design_lac_scan(turbine, inflow: KaimalInflow, *, n_points: Sequence[int] = 
     **Arguments:**
 
     - `turbine`: a `TURBINES` key (``"NREL5MW"``, ``"IEA15MW"``) or a `Turbine`.
-    - `inflow`: the turbulence (`lidarjax.control.KaimalInflow`: mean wind, intensity, scale).
+    - `inflow`: the turbulence: `lidarjax.control.KaimalInflow` (mean wind, intensity,
+      scale) or `lidarjax.control.MannInflow` (mean wind, level, length scale, shear
+      anisotropy; one code path: the spectra dispatch on its type).
     - `n_points`: beam or scan-point counts to try (outer loop), on a cone evenly in azimuth.
     - `distance` (m), `half_cone` (degrees), `gate_length` (m, pulsed only): a number (fixed)
       or a ``(lo, hi)`` box to optimise in.

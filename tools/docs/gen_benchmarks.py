@@ -116,6 +116,11 @@ BENCHMARKS = [
      "compilation; a scan design by gradients against a dense grid search, and Fu et al.'s "
      "spinner case", "IEA Wind Task 52's published analytic spectra and FFP inputs, a numpy "
      "implementation of the same sums, a 30 x 30 grid search", "lidar-assisted-control.md"),
+    ("lac_fu", "Lidar-assisted control beside Fu et al. 2023",
+     "the optimal scan radius of a single-beam spinner CW lidar on the IEA 15 MW with one "
+     "assumption changed at a time (turbulence model, mean wind, intensity, objective, probe, "
+     "scan points and timing, rotor weighting, focus distance)",
+     "Fu et al. 2023 (WES 8, 1893): 0.6 R", "lidar-assisted-control.md"),
     ("lac_time_domain", "Lidar-assisted control in the time domain",
      "REWS and its lidar estimate simulated over 1 and 6 hours through a Kaimal/IEC-coherence "
      "field (Veers' method with frozen-turbulence leads), Welch coherence against the analytic "
