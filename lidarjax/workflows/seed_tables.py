@@ -148,10 +148,11 @@ def simulate_settings(
         batch = simulate_rotations(stacked, scan, runs.batch_mount(idx), runs.heights,
                                    u_refs=u_ref, probe=probe)
         # split on the host and put back: indexing each device leaf compiles a program per
-        # leaf shape (jnp.asarray of a host array compiles nothing)
+        # leaf shape, and so does jnp.asarray of a host array since jax 0.10 (an identity
+        # program, `lax.stage`); jax.device_put compiles nothing
         host = jax.device_get(batch)
         for j, k in enumerate(idx):
-            out[runs.betas[k]] = jax.tree_util.tree_map(lambda a, j=j: jnp.asarray(a[j]), host)
+            out[runs.betas[k]] = jax.tree_util.tree_map(lambda a, j=j: jax.device_put(a[j]), host)
     return out
 
 
