@@ -62,6 +62,14 @@ def default_float():
     return jnp.asarray(0.0).dtype
 
 
+def host_array(value):
+    """A host (numpy) array or scalar as a JAX array on the default device, as
+    ``jnp.asarray`` gives it (same dtype, canonicalised without x64), without compiling:
+    since jax 0.10 ``jnp.asarray`` of a numpy array runs an identity program (``lax.stage``)
+    compiled once per shape and dtype; ``jax.device_put`` only copies."""
+    return jax.device_put(np.asarray(value))
+
+
 def safe_sqrt(square):
     """``sqrt(square)`` for ``square >= 0``, 0 where it is not positive, with a zero (not
     infinite or NaN) gradient there: the safe-mask form of a norm or RMS at the origin."""
@@ -90,7 +98,7 @@ def split(value, dtype=None):
         v64 = np.asarray(value, dtype=np.float64)
         hi = np.asarray(v64, dtype=dtype)
         lo = np.asarray(v64 - hi.astype(np.float64), dtype=dtype)
-        return jnp.asarray(hi), jnp.asarray(lo)
+        return host_array(hi), host_array(lo)
     value = jnp.asarray(value)
     if not jnp.issubdtype(value.dtype, jnp.floating):
         value = value.astype(dtype)

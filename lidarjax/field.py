@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import default_float, difference, is_concrete, split
+from ._precision import default_float, difference, host_array, is_concrete, split
 from ._util import compiled
 
 __all__ = ["AbstractField", "GridField", "SnapshotField", "FieldSequence", "TimeSampler",
@@ -90,7 +90,7 @@ class AbstractField(eqx.Module):
         if not isinstance(points, jax.Array) and is_concrete(points, self.origin, self.origin_lo):
             p64 = np.asarray(points, dtype=np.float64)
             o64 = np.asarray(self.origin, np.float64) + np.asarray(self.origin_lo, np.float64)
-            return _sample_local(self, jnp.asarray((p64 - o64).astype(dtype)))
+            return _sample_local(self, host_array((p64 - o64).astype(dtype)))
         points = jnp.asarray(points)
         if not jnp.issubdtype(points.dtype, jnp.floating):
             points = points.astype(dtype)
@@ -273,8 +273,8 @@ class PointIndex(eqx.Module):
         sp = proj[order]
         # a query's match lies at most this many places after the first point within tol
         count = np.searchsorted(sp, sp + 2 * tol, side="right") - np.arange(sp.size)
-        return cls(points=jnp.asarray(kept), tolerance=jnp.asarray(tol, dtype),
-                   projection=jnp.asarray(sp.astype(dtype)), order=jnp.asarray(order.astype(np.int32)),
+        return cls(points=host_array(kept), tolerance=jnp.asarray(tol, dtype),
+                   projection=host_array(sp.astype(dtype)), order=host_array(order.astype(np.int32)),
                    window=max(4, int(count.max())))
 
     @property
@@ -465,7 +465,7 @@ class GridField(AbstractField):
                              "float64 (cast with .astype(np.float32)).")
         if not (np.issubdtype(kind, np.number) or kind == np.bool_):
             raise ValueError(f"GridField: `velocity` must be numbers (m/s), got dtype {kind}.")
-        velocity = jnp.asarray(velocity)
+        velocity = host_array(velocity) if isinstance(velocity, np.ndarray) else jnp.asarray(velocity)
         if not jnp.issubdtype(velocity.dtype, jnp.floating):
             velocity = velocity.astype(default_float())
         dtype = velocity.dtype
@@ -494,7 +494,7 @@ class GridField(AbstractField):
             origin64 = np.array([a[0] for a in arrays])
             self.origin, self.origin_lo = split(origin64, dtype)
             local = [(a - a[0]).astype(dtype) for a in arrays]
-            self.x_local, self.y_local, self.z_local = (jnp.asarray(a) for a in local)
+            self.x_local, self.y_local, self.z_local = (host_array(a) for a in local)
             scale = _index_scale(np, local, dtype)  # on the host: no device operations
         else:
             detected = (False, False, False)

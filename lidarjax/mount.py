@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import is_concrete, split
+from ._precision import host_array, is_concrete, split
 
 __all__ = ["Mount"]
 
@@ -186,7 +186,7 @@ def _leaf(value, n):
         a = jnp.asarray(value, dtype=dtype)
         return a if n is None or a.ndim else jnp.broadcast_to(a, (n,))
     a = np.asarray(value, dtype=dtype)
-    return jnp.asarray(a if n is None or a.ndim else np.broadcast_to(a, (n,)))
+    return host_array(a if n is None or a.ndim else np.broadcast_to(a, (n,)))
 
 
 def _dtype_of(value):

@@ -41,7 +41,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 from scipy.interpolate import CubicSpline
 
-from ._precision import default_float, is_concrete
+from ._precision import default_float, host_array, is_concrete
 from ._util import compiled
 from .angles import horizontal_speed, wind_direction
 from .forward import Simulation, beam_flow, gradient_along_beams, probe_for_field, simulate
@@ -487,7 +487,7 @@ class ResponseTable(eqx.Module):
         _check_columns("response", r, knots)
         self.directions = jnp.asarray(knots, dtype)
         self.response = jnp.asarray(r, dtype)
-        self.valid = jnp.asarray(~np.isnan(r).all(axis=0))
+        self.valid = host_array(~np.isnan(r).all(axis=0))
         self.response_spline = _fit(knots, r, dtype)
 
         def optional(name, value, shape):

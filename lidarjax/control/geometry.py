@@ -16,9 +16,11 @@ lidarjax nacelle beams (`lidarjax.nacelle_4beam`, ``pitch=-90``) seen from the r
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -132,7 +134,12 @@ def cone_points(distance: Float[ArrayLike, ""], half_cone: Float[ArrayLike, ""],
     """
     if not isinstance(n_points, int | np.integer) or n_points < 1:
         raise ValueError(f"cone_points: n_points must be a positive integer, got {n_points!r}")
-    x = jnp.asarray(distance, default_float())
+    return _cone_points(jnp.asarray(distance, default_float()), half_cone, azimuth_offset, int(n_points))
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _cone_points(x, half_cone, azimuth_offset, n_points):
+    """`cone_points` as one compiled program (eagerly, each operation compiles on its own)."""
     rho = x * jnp.tan(jnp.deg2rad(half_cone))
     phi = jnp.deg2rad(azimuth_offset) + 2 * np.pi * jnp.arange(n_points, dtype=x.dtype) / n_points
     return jnp.stack([jnp.broadcast_to(x, phi.shape), rho * jnp.cos(phi), rho * jnp.sin(phi)], axis=1)
@@ -196,6 +203,15 @@ def lidar_samples(focus_points: Float[ArrayLike, "b 3"], *,
     **Returns:** a `LidarSamples` with ``n = b * q`` nodes, each beam weighted ``1/b``.
     Differentiable in every number (positions, weights, the probe's lengths, times).
     """
+    host = lambda a: a if a is None or isinstance(a, jax.Array) else np.asarray(a)  # noqa: E731
+    return _lidar_samples(*(host(a) for a in (focus_points, lidar_position)), probe,
+                          *(host(a) for a in (offsets, offset_weights, times)))
+
+
+@eqx.filter_jit
+def _lidar_samples(focus_points, lidar_position, probe, offsets, offset_weights, times):
+    """`lidar_samples` as one compiled program per structure (its checks of shapes run while
+    it is traced, before compiling)."""
     fp = jnp.asarray(focus_points)
     dtype = fp.dtype if jnp.issubdtype(fp.dtype, jnp.floating) else default_float()
     _check_samples(fp, probe, offsets, offset_weights, times)

@@ -59,7 +59,7 @@ class LacSpectra(eqx.Module):
     @property
     def coherence(self) -> Float[Array, " f"]:
         """Squared coherence ``gamma^2 = |S_RL|^2 / (S_RR S_LL)`` (dimensionless, 0..1)."""
-        return jnp.abs(self.S_RL) ** 2 / (self.S_RR * self.S_LL)
+        return _coherence(self.S_RL, self.S_RR, self.S_LL)
 
     @property
     def transfer(self) -> Float[Array, " f"]:
@@ -70,6 +70,12 @@ class LacSpectra(eqx.Module):
     def wavenumber(self) -> Float[Array, " f"]:
         """``k = 2 pi f / U`` (rad/m)."""
         return 2 * np.pi * self.frequency / self.mean_speed
+
+
+@jax.jit
+def _coherence(s_rl, s_rr, s_ll):
+    """`LacSpectra.coherence`: one compiled program (eagerly, four)."""
+    return jnp.abs(s_rl) ** 2 / (s_rr * s_ll)
 
 
 def _lateral_distance(a, b):

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 
+import equinox as eqx
 import numpy as np
 from scipy import signal, stats
 
@@ -95,6 +96,12 @@ def _series(coefficients, n):
     return np.fft.irfft(full, n)
 
 
+@eqx.filter_jit
+def _spectra_and_rate(inflow, freq):
+    """The inflow's spectra and coherence decay rate at `freq`: one compiled program."""
+    return inflow.spectra(freq), inflow.decay_rate(freq)
+
+
 def kaimal_rews_series(samples: LidarSamples, rotor: RotorDisc, inflow: KaimalInflow, *,
                        duration: float, dt: float, seed: int = 0):
     """The REWS and its lidar estimate simulated in Kaimal/IEC turbulence (module docs).
@@ -117,8 +124,7 @@ def kaimal_rews_series(samples: LidarSamples, rotor: RotorDisc, inflow: KaimalIn
                          f"duration={duration}")
     n = int(round(duration / dt))
     freq = np.arange(1, n // 2) / (n * dt)
-    spec = np.asarray(inflow.spectra(freq), np.float64)
-    rate = np.asarray(inflow.decay_rate(freq), np.float64)
+    spec, rate = (np.asarray(a, np.float64) for a in _spectra_and_rate(inflow, freq))
     rng = np.random.default_rng(seed)
     pts = np.asarray(samples.points, np.float64)
     rotor_yz = np.asarray(rotor.points, np.float64)

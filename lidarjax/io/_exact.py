@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._precision import host_array
 from .._util import compiled
 from ..beam import simulate_points
 from ..field import (
@@ -97,9 +98,9 @@ class CellPointTets(eqx.Module):
         if found.any():
             inv[found] = np.linalg.inv(edges[found])
         self.index = PointIndex.build(pts - o64, dtype, tolerance, caller=caller)
-        self.anchor = jnp.asarray(np.where(found[:, None], rel[:, 0], 0.0).astype(dtype))
-        self.inverse = jnp.asarray(inv.astype(dtype))
-        self.found = jnp.asarray(found)
+        self.anchor = host_array(np.where(found[:, None], rel[:, 0], 0.0).astype(dtype))
+        self.inverse = host_array(inv.astype(dtype))
+        self.found = host_array(found)
 
     @property
     def n_points(self) -> int:
@@ -131,8 +132,8 @@ class CellPointTets(eqx.Module):
         if val.shape != shape:
             raise ValueError(f"{caller}: `values` must have shape {shape}, got {val.shape}")
         valid = np.isfinite(val).all(axis=(-2, -1)) & np.asarray(self.found)
-        return (jnp.asarray(np.where(valid[..., None, None], val, 0.0).astype(self.anchor.dtype)),
-                jnp.asarray(valid))
+        return (host_array(np.where(valid[..., None, None], val, 0.0).astype(self.anchor.dtype)),
+                host_array(valid))
 
     def weights(self, points: Float[Array, "... 3"]):
         """``(best, hit, lam)``: the prepared point nearest each query (local metres; its

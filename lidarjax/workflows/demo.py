@@ -97,9 +97,11 @@ def heights() -> np.ndarray:
     return np.arange(1, NH + 1) * HEIGHT / NH
 
 
+@jax.jit
 def location(beta):
     """The lidar in the CFD frame when the platform is rotated by `beta` degrees (the deck
-    position turns by ``beta``: ``R(beta - psi) R(psi) DECK``); works on traced `beta`."""
+    position turns by ``beta``: ``R(beta - psi) R(psi) DECK``); works on traced `beta`. One
+    compiled program (eagerly, its rotations would compile each operation on their own)."""
     return rotation_z(beta - PSI) @ rotation_z(PSI) @ jnp.asarray(DECK)
 
 
@@ -160,6 +162,13 @@ def format_table(result: DemoResult, rows=None) -> str:
     return "\n".join(lines)
 
 
+@jax.jit
+def _reconstruct_v2(los):
+    """The Windcube V2's reported wind of every record ``(n, h, b)``: one compiled program
+    (an eager vmap compiles each of its operations on its own)."""
+    return jax.vmap(lambda x: reconstruct(windcube_v2(), x))(los)
+
+
 def synthetic_records(n: int = N_RECORDS, seed: int = 0):
     """Truth and Windcube V2 output for `n` 10-minute records at random speeds (Weibull,
     A = 10 m/s, k = 2) and directions (uniform), with LOS noise `LOS_NOISE`.
@@ -176,7 +185,7 @@ def synthetic_records(n: int = N_RECORDS, seed: int = 0):
     los = np.asarray(sims.los) * scale[:, None, None]
     direction = np.asarray(sims.free_direction)
     los = los + rng.normal(scale=LOS_NOISE, size=los.shape)
-    reported = np.asarray(jax.vmap(lambda x: reconstruct(windcube_v2(), x))(jnp.asarray(los)))
+    reported = np.asarray(_reconstruct_v2(los))
     t0 = np.datetime64("2025-01-01T00:10")
     times = t0 + np.arange(n) * np.timedelta64(10, "m")
     return times, speed, direction, los, reported

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._backend import default_batch, positive_size
+from .._precision import host_array
 from .._util import import_optional
 from ..angles import horizontal_speed, seed_azimuth
 from ..batch import simulate_rotations, stack_fields
@@ -148,10 +149,10 @@ def simulate_settings(
         batch = simulate_rotations(stacked, scan, runs.batch_mount(idx), runs.heights,
                                    u_refs=u_ref, probe=probe)
         # split on the host and put back: indexing each device leaf compiles a program per
-        # leaf shape (jnp.asarray of a host array compiles nothing)
+        # leaf shape, and so does jnp.asarray of a host array (`host_array` does not)
         host = jax.device_get(batch)
         for j, k in enumerate(idx):
-            out[runs.betas[k]] = jax.tree_util.tree_map(lambda a, j=j: jnp.asarray(a[j]), host)
+            out[runs.betas[k]] = jax.tree_util.tree_map(lambda a, j=j: host_array(a[j]), host)
     return out
 
 

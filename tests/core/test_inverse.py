@@ -406,12 +406,11 @@ def test_batch_size_all_and_validation(table, random_records):
             lj.invert_reconstructed(table, np.ones(4), np.ones(4), batch_size=bad)
 
 
-def test_negative_reported_speed_is_impossible_not_the_opposite_direction():
-    table = sites.table(15.0)
+def test_negative_reported_speed_is_impossible_not_the_opposite_direction(table):
     h = len(sites.HEIGHTS)
     speed = np.array([[9.0] * h, [-9.0] * h])
     direction = np.full((2, h), 200.0)
-    inv = lj.invert_reconstructed(table, speed, direction)
+    inv = reconstructed(table, speed, direction)  # the program test_invert_reconstructed compiled
     assert np.all(np.isfinite(np.asarray(inv.speed[0])))
     assert np.all(np.isnan(np.asarray(inv.speed[1]))) and np.all(np.isnan(np.asarray(inv.direction[1])))
     flags = np.asarray(inv.flags[1])
