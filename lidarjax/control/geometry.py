@@ -175,10 +175,6 @@ def _check_samples(fp, probe, offsets, offset_weights, times):
                          f"got {np.shape(times)}")
 
 
-def _asarray(x):
-    return None if x is None else jnp.asarray(x)
-
-
 def lidar_samples(focus_points: Float[ArrayLike, "b 3"], *,
                   lidar_position: Float[ArrayLike, " 3"] = (0.0, 0.0, 0.0),
                   probe=None, offsets: Float[ArrayLike, " q"] | None = None,
@@ -203,20 +199,12 @@ def lidar_samples(focus_points: Float[ArrayLike, "b 3"], *,
     **Returns:** a `LidarSamples` with ``n = b * q`` nodes, each beam weighted ``1/b``.
     Differentiable in every number (positions, weights, the probe's lengths, times).
     """
-    host = lambda a: a if a is None or isinstance(a, jax.Array) else np.asarray(a)  # noqa: E731
-    return _lidar_samples(*(host(a) for a in (focus_points, lidar_position)), probe,
-                          *(host(a) for a in (offsets, offset_weights, times)))
-
-
-@eqx.filter_jit
-def _lidar_samples(focus_points, lidar_position, probe, offsets, offset_weights, times):
-    """`lidar_samples` as one compiled program per structure (its checks of shapes run while
-    it is traced, before compiling)."""
-    fp = jnp.asarray(focus_points)
+    fp, position, offsets, offset_weights, times = (
+        a if a is None or isinstance(a, jax.Array) else np.asarray(a)  # host: nothing compiles
+        for a in (focus_points, lidar_position, offsets, offset_weights, times))
     dtype = fp.dtype if jnp.issubdtype(fp.dtype, jnp.floating) else default_float()
     _check_samples(fp, probe, offsets, offset_weights, times)
-    return _samples(fp, jnp.asarray(lidar_position), probe, _asarray(offsets),
-                    _asarray(offset_weights), _asarray(times), np.dtype(dtype))
+    return _samples(fp, position, probe, offsets, offset_weights, times, np.dtype(dtype))
 
 
 @eqx.filter_jit
