@@ -70,17 +70,6 @@ def host_array(value):
     return jax.device_put(np.asarray(value))
 
 
-def to_device(values: list) -> list:
-    """`host_array` of every numpy array in `values` in one ``jax.device_put`` (one call's
-    overhead for all of them, not one each); JAX arrays and tracers are returned as they are."""
-    on_host = [k for k, v in enumerate(values) if isinstance(v, np.ndarray)]
-    moved = jax.device_put([values[k] for k in on_host]) if on_host else []
-    out = list(values)
-    for k, v in zip(on_host, moved, strict=True):
-        out[k] = v
-    return out
-
-
 def safe_sqrt(square):
     """``sqrt(square)`` for ``square >= 0``, 0 where it is not positive, with a zero (not
     infinite or NaN) gradient there: the safe-mask form of a norm or RMS at the origin."""
@@ -96,13 +85,12 @@ def as_float(value, dtype=None):
     return value.astype(dtype)
 
 
-def split(value, dtype=None, *, on_host: bool = False):
+def split(value, dtype=None):
     """Split `value` into ``(hi, lo)`` in `dtype` with ``hi + lo`` ~ value to float64 accuracy.
 
-    Concrete inputs are read in float64 on the host (``on_host``: returned as numpy arrays,
-    for the caller's one `to_device`); traced inputs give ``lo = 0`` (unless they are wider
-    than `dtype`, in which case the residual is computed in-graph, see `_split_wide`).
-    Derivatives: those of ``value`` go to ``hi``, none to ``lo``.
+    Concrete inputs are read in float64 on the host; traced inputs give ``lo = 0`` (unless
+    they are wider than `dtype`, in which case the residual is computed in-graph, see
+    `_split_wide`). Derivatives: those of ``value`` go to ``hi``, none to ``lo``.
     """
     if dtype is None:
         dtype = default_float()
@@ -110,7 +98,7 @@ def split(value, dtype=None, *, on_host: bool = False):
         v64 = np.asarray(value, dtype=np.float64)
         hi = np.asarray(v64, dtype=dtype)
         lo = np.asarray(v64 - hi.astype(np.float64), dtype=dtype)
-        return (hi, lo) if on_host else (host_array(hi), host_array(lo))
+        return host_array(hi), host_array(lo)
     value = jnp.asarray(value)
     if not jnp.issubdtype(value.dtype, jnp.floating):
         value = value.astype(dtype)

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import is_concrete, split, to_device
+from ._precision import host_array, is_concrete, split
 
 __all__ = ["Mount"]
 
@@ -132,14 +132,12 @@ class Mount(eqx.Module):
                     k = int(np.argmax(~np.isfinite(a)))
                     raise ValueError(f"Mount: `{name}` must be finite angles in degrees; mount "
                                      f"{k} has {a[k]}.")
-        hi, lo = split(location, _dtype_of(location), on_host=True)
+        hi, lo = split(location, _dtype_of(location))
         if n is not None and hi.ndim == 1:
-            bc = np.broadcast_to if isinstance(hi, np.ndarray) else jnp.broadcast_to
-            hi, lo = bc(hi, (n, 3)), bc(lo, (n, 3))
-        leaves = to_device([hi, lo, *(_leaf(val, n) for val in angles.values())])
-        self.location, self.location_lo = leaves[:2]
-        for name, leaf in zip(angles, leaves[2:], strict=True):
-            setattr(self, name, leaf)
+            hi, lo = jnp.broadcast_to(hi, (n, 3)), jnp.broadcast_to(lo, (n, 3))
+        self.location, self.location_lo = hi, lo
+        for name, val in angles.items():
+            setattr(self, name, _leaf(val, n))
 
     @property
     def batch_shape(self) -> tuple[int, ...]:
@@ -181,15 +179,14 @@ def _as_traced_array(value):
 
 
 def _leaf(value, n):
-    """An angle in its dtype (`_dtype_of`), broadcast to ``(n,)`` for a batch (`n` not None):
-    a JAX array for a JAX input, else a numpy array (the Mount moves its host leaves to the
-    device together, `to_device`: no dispatched cast, one transfer)."""
+    """An angle as a JAX array of its dtype (`_dtype_of`), broadcast to ``(n,)`` for a batch
+    (`n` not None). Host numbers go through numpy first: one transfer, no dispatched cast."""
     dtype = _dtype_of(value)
     if isinstance(value, jax.Array):  # JAX arrays and tracers
         a = jnp.asarray(value, dtype=dtype)
         return a if n is None or a.ndim else jnp.broadcast_to(a, (n,))
     a = np.asarray(value, dtype=dtype)
-    return a if n is None or a.ndim else np.broadcast_to(a, (n,))
+    return host_array(a if n is None or a.ndim else np.broadcast_to(a, (n,)))
 
 
 def _dtype_of(value):
