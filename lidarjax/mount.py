@@ -200,7 +200,8 @@ def _host_leaves_on_device(location, angles):
         layout.append((g, offsets[a.dtype], a.shape))
         offsets[a.dtype] += a.size
     flats = tuple(np.concatenate([a.ravel() for a in leaves if a.dtype == dt]) for dt in dtypes)
-    return _cut(flats, tuple(layout))
+    with jax.ensure_compile_time_eval():  # concrete leaves even when built inside a jit
+        return _cut(flats, tuple(layout))
 
 
 @functools.partial(jax.jit, static_argnums=1)
