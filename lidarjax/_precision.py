@@ -95,9 +95,7 @@ def split(value, dtype=None):
     if dtype is None:
         dtype = default_float()
     if is_concrete(value) and not isinstance(value, jax.Array):
-        v64 = np.asarray(value, dtype=np.float64)
-        hi = np.asarray(v64, dtype=dtype)
-        lo = np.asarray(v64 - hi.astype(np.float64), dtype=dtype)
+        hi, lo = split_host(value, dtype)
         return host_array(hi), host_array(lo)
     value = jnp.asarray(value)
     if not jnp.issubdtype(value.dtype, jnp.floating):
@@ -106,6 +104,13 @@ def split(value, dtype=None):
         return _split_wide(value, jnp.dtype(dtype))
     hi = value.astype(dtype)
     return hi, jnp.zeros_like(hi)
+
+
+def split_host(value, dtype):
+    """`split` of host numbers, on the host: numpy ``(hi, lo)`` in `dtype`, read in float64."""
+    v64 = np.asarray(value, dtype=np.float64)
+    hi = np.asarray(v64, dtype=dtype)
+    return hi, np.asarray(v64 - hi.astype(np.float64), dtype=dtype)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))

@@ -8,13 +8,15 @@ rotations ``Mount(location, beta=np.linspace(0, 360, 10_000))``).
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import host_array, is_concrete, split
+from ._precision import host_array, is_concrete, split, split_host
 
 __all__ = ["Mount"]
 
@@ -132,6 +134,12 @@ class Mount(eqx.Module):
                     k = int(np.argmax(~np.isfinite(a)))
                     raise ValueError(f"Mount: `{name}` must be finite angles in degrees; mount "
                                      f"{k} has {a[k]}.")
+        if n is None and not any(isinstance(v, jax.Array) for v in (location, *angles.values())):
+            leaves = _host_leaves_on_device(location, angles.values())
+            self.location, self.location_lo, *angle_leaves = leaves
+            for name, leaf in zip(angles, angle_leaves, strict=True):
+                setattr(self, name, leaf)
+            return
         hi, lo = split(location, _dtype_of(location))
         if n is not None and hi.ndim == 1:
             hi, lo = jnp.broadcast_to(hi, (n, 3)), jnp.broadcast_to(lo, (n, 3))
@@ -176,6 +184,31 @@ def _as_traced_array(value):
         return np.asarray(value, dtype=np.float64)
     except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
         return jnp.asarray(value)
+
+
+def _host_leaves_on_device(location, angles):
+    """The leaves of one mount given as host numbers (location ``(3,)``, scalar angles), as
+    JAX arrays: computed on the host as `split` and `_leaf` would, joined into one vector per
+    dtype and cut into the leaves by one compiled function (one per dtype layout), so that a
+    mount costs one transfer and one dispatch, not eight (about 0.05 ms instead of 0.6 ms)."""
+    hi, lo = split_host(location, _dtype_of(location))
+    leaves = [hi, lo] + [np.asarray(a, dtype=_dtype_of(a)) for a in angles]
+    dtypes = list(dict.fromkeys(a.dtype for a in leaves))  # first-seen order
+    layout, offsets = [], dict.fromkeys(dtypes, 0)
+    for a in leaves:
+        g = dtypes.index(a.dtype)
+        layout.append((g, offsets[a.dtype], a.shape))
+        offsets[a.dtype] += a.size
+    flats = tuple(np.concatenate([a.ravel() for a in leaves if a.dtype == dt]) for dt in dtypes)
+    with jax.ensure_compile_time_eval():  # concrete leaves even when built inside a jit
+        return _cut(flats, tuple(layout))
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _cut(flats, layout):
+    """Leaves ``flats[g][i:i + size].reshape(shape)`` for each ``(g, i, shape)`` of `layout`."""
+    return [jnp.reshape(flats[g][i:i + int(np.prod(shape, dtype=np.int64))], shape)
+            for g, i, shape in layout]
 
 
 def _leaf(value, n):

@@ -162,12 +162,15 @@ def assert_grad_matches_fd(f, x, eps=1e-6, rtol=1e-6, atol=1e-8, jit=False):
     """Reverse-mode, forward-mode and centred finite differences agree, and are finite. With
     `jit`, each derivative is one compiled function (taken eagerly, the jit calls inside `f`
     compile once more per transformation: a reverse-mode forward pass and its transpose); not
-    for an `f` that needs concrete values before its own jit (`simulate_scan`)."""
+    for an `f` that needs concrete values before its own jit (`simulate_scan`). Returns the
+    reverse-mode gradient function it checked (compiled with `jit`), for more points."""
     x = jnp.asarray(x, dtype=jnp.float64)
     wrap = jax.jit if jit else (lambda g: g)
-    g_rev = np.asarray(wrap(jax.grad(f))(x))
+    grad = wrap(jax.grad(f))
+    g_rev = np.asarray(grad(x))
     g_fwd = np.asarray(wrap(jax.jacfwd(f))(x))
     g_fd = central_difference(f, x, eps)
     assert np.all(np.isfinite(g_rev)), g_rev
     np.testing.assert_allclose(g_rev, g_fwd, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(g_rev, g_fd, rtol=rtol, atol=atol)
+    return grad

@@ -207,9 +207,9 @@ def test_tilt_gradients_match_finite_differences():
         m = lj.Mount([40.0, 10.0, 0.5], pitch=angles[0], roll=angles[1])
         return lj.simulate(scene, scan, m, [60.0]).lidar_speed[0]
 
-    assert_grad_matches_fd(speed, jnp.array([1.2, -0.7]), eps=1e-5, rtol=1e-5, atol=1e-9,
-                           jit=True)
-    g0 = jax.grad(speed)(jnp.zeros(2))
+    grad = assert_grad_matches_fd(speed, jnp.array([1.2, -0.7]), eps=1e-5, rtol=1e-5,
+                                  atol=1e-9, jit=True)
+    g0 = grad(jnp.zeros(2))  # the level mount, through the same compiled gradient
     assert np.all(np.isfinite(np.asarray(g0)))
 
 
@@ -431,3 +431,16 @@ def test_ten_thousand_mounts_from_lists_cost_about_one_read_of_the_numbers():
     t_mount = best(lambda: lj.Mount(locs, beta=betas, psi=180.0))
     t_read = best(lambda: (np.asarray(locs), np.asarray(betas)))
     assert t_mount < 12.0 * t_read + 0.01, (t_mount, t_read)
+
+
+def test_mount_of_host_numbers_has_concrete_leaves_inside_transformations():
+    """A single Mount from host numbers is one transfer cut into its leaves by one compiled
+    function; built inside `jax.jit` or `jax.grad` its leaves stay concrete arrays (as a
+    transfer of host numbers is), and each keeps its own dtype."""
+    def f(x):
+        m = lj.Mount([1.0, 2.0, 3.0], beta=2.0, pitch=np.float32(1.0))
+        leaves = jax.tree_util.tree_leaves(m)
+        assert not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+        assert m.pitch.dtype == np.float32 and m.location.dtype == np.float64
+        return m.beta * x
+    assert float(jax.jit(f)(2.0)) == 4.0 and float(jax.grad(f)(2.0)) == 2.0

@@ -68,6 +68,36 @@ def test_overlap_derivatives_finite_and_exact(r1, r2):
 
 
 # ---------------------------------------------------------------------------------- FLORIS
+@pytest.fixture(autouse=True, scope="module")
+def _floris_path_lookup_without_source_context():
+    """FLORIS resolves each turbine's library path (`floris.type_dec.convert_to_path`, run for
+    every turbine each time a model is built, set or run) by reading the file names of
+    ``inspect.stack()``, which also loads every frame's source lines and, for frames without a
+    file (attrs-generated methods), scans all of ``sys.modules`` (thousands with JAX loaded):
+    about 2/3 of these tests' CPU. The same file names, read from the frames directly (what
+    ``stack()[k].filename`` gives for frames of existing files; the paths resolve the same)."""
+    import sys
+    import types
+
+    try:
+        from floris import type_dec
+    except ImportError:  # the FLORIS tests then fail on their own import
+        yield
+        return
+    real = type_dec.inspect
+
+    def stack():
+        frame, frames = sys._getframe(1), []
+        while frame is not None:
+            frames.append(types.SimpleNamespace(filename=frame.f_code.co_filename))
+            frame = frame.f_back
+        return frames
+
+    type_dec.inspect = types.SimpleNamespace(stack=stack)
+    yield
+    type_dec.inspect = real
+
+
 LAYOUT_X = [0.0, 630.0, 1260.0, 300.0]
 LAYOUT_Y = [0.0, 20.0, -40.0, 300.0]
 YAW = [20.0, -10.0, 0.0, 5.0]
