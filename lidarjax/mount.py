@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import host_array, is_concrete, split, split_host
+from ._precision import is_concrete, split, split_host
 
 __all__ = ["Mount"]
 
@@ -140,12 +140,15 @@ class Mount(eqx.Module):
             for name, leaf in zip(angles, angle_leaves, strict=True):
                 setattr(self, name, leaf)
             return
-        hi, lo = split(location, _dtype_of(location))
+        on_host = is_concrete(location) and not isinstance(location, jax.Array)
+        hi, lo = (split_host if on_host else split)(location, _dtype_of(location))
         if n is not None and hi.ndim == 1:
-            hi, lo = jnp.broadcast_to(hi, (n, 3)), jnp.broadcast_to(lo, (n, 3))
-        self.location, self.location_lo = hi, lo
-        for name, val in angles.items():
-            setattr(self, name, _leaf(val, n))
+            bc = np.broadcast_to if on_host else jnp.broadcast_to
+            hi, lo = bc(hi, (n, 3)), bc(lo, (n, 3))
+        leaves = _to_device([hi, lo, *(_leaf(val, n) for val in angles.values())])
+        self.location, self.location_lo, *angle_leaves = leaves
+        for name, leaf in zip(angles, angle_leaves, strict=True):
+            setattr(self, name, leaf)
 
     @property
     def batch_shape(self) -> tuple[int, ...]:
@@ -212,14 +215,25 @@ def _cut(flats, layout):
 
 
 def _leaf(value, n):
-    """An angle as a JAX array of its dtype (`_dtype_of`), broadcast to ``(n,)`` for a batch
-    (`n` not None). Host numbers go through numpy first: one transfer, no dispatched cast."""
+    """An angle in its dtype (`_dtype_of`), broadcast to ``(n,)`` for a batch (`n` not None):
+    a JAX array for a JAX input, else a numpy array (moved with the other host leaves in one
+    transfer, `_to_device`)."""
     dtype = _dtype_of(value)
     if isinstance(value, jax.Array):  # JAX arrays and tracers
         a = jnp.asarray(value, dtype=dtype)
         return a if n is None or a.ndim else jnp.broadcast_to(a, (n,))
     a = np.asarray(value, dtype=dtype)
-    return host_array(a if n is None or a.ndim else np.broadcast_to(a, (n,)))
+    return a if n is None or a.ndim else np.broadcast_to(a, (n,))
+
+
+def _to_device(leaves: list) -> list:
+    """The numpy arrays among `leaves` as JAX arrays in one ``jax.device_put`` (one call's
+    overhead for all, not one each; nothing compiles); JAX arrays and tracers as they are."""
+    at = [k for k, a in enumerate(leaves) if isinstance(a, np.ndarray)]
+    out = list(leaves)
+    for k, a in zip(at, jax.device_put([leaves[k] for k in at]) if at else [], strict=True):
+        out[k] = a
+    return out
 
 
 def _dtype_of(value):
