@@ -98,9 +98,8 @@ class CellPointTets(eqx.Module):
         if found.any():
             inv[found] = np.linalg.inv(edges[found])
         self.index = PointIndex.build(pts - o64, dtype, tolerance, caller=caller)
-        self.anchor = host_array(np.where(found[:, None], rel[:, 0], 0.0).astype(dtype))
-        self.inverse = host_array(inv.astype(dtype))
-        self.found = host_array(found)
+        self.anchor, self.inverse, self.found = host_array(
+            (np.where(found[:, None], rel[:, 0], 0.0).astype(dtype), inv.astype(dtype), found))
 
     @property
     def n_points(self) -> int:
@@ -132,8 +131,8 @@ class CellPointTets(eqx.Module):
         if val.shape != shape:
             raise ValueError(f"{caller}: `values` must have shape {shape}, got {val.shape}")
         valid = np.isfinite(val).all(axis=(-2, -1)) & np.asarray(self.found)
-        return (host_array(np.where(valid[..., None, None], val, 0.0).astype(self.anchor.dtype)),
-                host_array(valid))
+        return host_array((np.where(valid[..., None, None], val, 0.0).astype(self.anchor.dtype),
+                           valid))
 
     def weights(self, points: Float[Array, "... 3"]):
         """``(best, hit, lam)``: the prepared point nearest each query (local metres; its

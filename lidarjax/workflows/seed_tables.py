@@ -152,7 +152,7 @@ def simulate_settings(
         # leaf shape, and so does jnp.asarray of a host array (`host_array` does not)
         host = jax.device_get(batch)
         for j, k in enumerate(idx):
-            out[runs.betas[k]] = jax.tree_util.tree_map(lambda a, j=j: host_array(a[j]), host)
+            out[runs.betas[k]] = host_array(jax.tree_util.tree_map(lambda a, j=j: a[j], host))
     return out
 
 
