@@ -287,6 +287,7 @@ def _executable(fn, static, treedef, avals, statics, fast, backend):
 
 def _run(fn, problem, cand, lo, hi, solver, max_steps, n_starts, batch_size, grid_shape=None):
     """The whole search as one compiled program (module docs)."""
+    fn = eqx.filter_jit(fn)  # traced once, then batched and differentiated as a jaxpr
     values, ok = map_in_batches(lambda x: fn(problem, x)[:2], cand, batch_size)
     ok = ok & jnp.isfinite(values)
     score = jnp.where(ok, values, jnp.inf)
