@@ -59,7 +59,7 @@ def is_concrete(*values) -> bool:
 
 def default_float():
     """The default floating dtype of this JAX configuration (float64 only with x64 on)."""
-    return jnp.asarray(0.0).dtype
+    return jax.dtypes.canonicalize_dtype(np.float64)
 
 
 def host_array(value):

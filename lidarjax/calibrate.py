@@ -427,6 +427,7 @@ def _reduced_pieces(model: _CalibrationModel, problems: _Problems, freef, nuisan
     return resid, h_i, s_i, ainv, gn, c, ok
 
 
+@eqx.filter_jit  # traced once: for the loop's shapes (eval_shape) and in the loop
 def _evaluate(model, problems, freef, n_records, nuisance, theta, it):
     """The statistics at a point (`_Solution`) and what its step needs."""
     w = problems.weights
