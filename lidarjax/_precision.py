@@ -57,6 +57,13 @@ def is_concrete(*values) -> bool:
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
+def is_host(value) -> bool:
+    """True for a concrete value that is not itself a JAX array (numpy, Python numbers, lists
+    of them): `split` and `Mount` read it in float64 on the host, where a JAX array or a
+    tracer stays on the device."""
+    return is_concrete(value) and not isinstance(value, jax.Array)
+
+
 def default_float():
     """The default floating dtype of this JAX configuration (float64 only with x64 on)."""
     return jax.dtypes.canonicalize_dtype(np.float64)
@@ -95,7 +102,7 @@ def split(value, dtype=None):
     """
     if dtype is None:
         dtype = default_float()
-    if is_concrete(value) and not isinstance(value, jax.Array):
+    if is_host(value):
         return host_array(split_host(value, dtype))
     value = jnp.asarray(value)
     if not jnp.issubdtype(value.dtype, jnp.floating):

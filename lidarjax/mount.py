@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import host_array, is_concrete, split, split_host
+from ._precision import host_array, is_concrete, is_host, split, split_host
 
 __all__ = ["Mount"]
 
@@ -134,7 +134,7 @@ class Mount(eqx.Module):
                     k = int(np.argmax(~np.isfinite(a)))
                     raise ValueError(f"Mount: `{name}` must be finite angles in degrees; mount "
                                      f"{k} has {a[k]}.")
-        on_host = is_concrete(location) and not isinstance(location, jax.Array)
+        on_host = is_host(location)
         hi, lo = (split_host if on_host else split)(location, _dtype_of(location))
         if n is not None and hi.ndim == 1:
             bc = np.broadcast_to if on_host else jnp.broadcast_to
