@@ -497,7 +497,9 @@ def register_mesh_grid(grid: AbstractField, prepare, name: str) -> None:
     cellPoint) at the points it samples, wherever they are known on the host (a fixed
     mount), and warns once in one line where they are not (`exact_by_default`)."""
     key = id(grid)
-    _MESH_GRIDS[key] = (weakref.ref(grid, lambda _, k=key: _MESH_GRIDS.pop(k, None)),
+    # The callback holds the registry itself: at interpreter exit a grid may outlive the
+    # module's globals (then None), and its callback must still find the dict.
+    _MESH_GRIDS[key] = (weakref.ref(grid, lambda _, k=key, grids=_MESH_GRIDS: grids.pop(k, None)),
                         _MeshSource(prepare, name))
 
 

@@ -5,7 +5,9 @@ tests/data/openfoam_transient/README.md)."""
 
 from __future__ import annotations
 
+import gc
 import re
+import sys
 import warnings
 from pathlib import Path
 
@@ -550,3 +552,23 @@ def test_a_mesh_loaded_without_points_is_exact_where_simulate_samples():
     assert np.abs(batch[0] - los).max() > 0.05  # the graded grid next to the ground
     grid = lj.io.load_field(GRADED, time="10", region=region, exact_at=False)
     assert lj.beam.exact_by_default(grid, scan, mount, GRADED_HEIGHTS, None, "simulate") is grid
+
+
+def test_a_mesh_grid_freed_after_the_registry_is_gone_raises_nothing(monkeypatch):
+    """At interpreter exit a grid `load_field` resampled from a mesh may outlive the module
+    globals of `lidarjax.beam` (None by then): freeing it then must not print "Exception
+    ignored in ... 'NoneType' object has no attribute 'pop'" (it did once the suite froze
+    its heap at exit); the grid still leaves the registry."""
+    from lidarjax import beam
+
+    grid = lj.GridField(np.arange(3.0), np.arange(3.0), np.arange(3.0), np.zeros((3, 3, 3, 3)))
+    beam.register_mesh_grid(grid, lambda points: None, "a mesh")
+    registry, key = beam._MESH_GRIDS, id(grid)
+    assert key in registry
+    unraisable = []
+    monkeypatch.setattr(sys, "unraisablehook", unraisable.append)
+    monkeypatch.setattr(beam, "_MESH_GRIDS", None)  # what interpreter shutdown does
+    del grid
+    gc.collect()
+    assert not unraisable, [u.exc_value for u in unraisable]
+    assert key not in registry
