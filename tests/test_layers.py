@@ -124,7 +124,7 @@ def test_internal_imports_all_at_module_top():
 
 
 # Core modules slow to import, imported by the one function that needs them: scipy.signal (with
-# the scipy.stats it imports) was 1.4 s of `import lidarjax`'s 3.4 s, for `welch_coherence` alone.
+# the scipy.stats it imports) was 1.1 s of `import lidarjax`'s 5.2 s, for `welch_coherence` alone.
 SLOW_TO_IMPORT = {"scipy.signal"}
 
 
