@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._precision import default_float, difference, host_array, is_concrete, split
+from ._precision import default_float, difference, host_array, is_concrete, is_host, split
 from ._util import compiled
 
 __all__ = ["AbstractField", "GridField", "SnapshotField", "FieldSequence", "TimeSampler",
@@ -87,7 +87,7 @@ class AbstractField(eqx.Module):
         accurately; JAX arrays are subtracted in their own precision (float32 JAX points
         at UTM coordinates are already rounded to a 0.03-0.5 m grid: use `sample_local`)."""
         dtype = self.dtype
-        if not isinstance(points, jax.Array) and is_concrete(points, self.origin, self.origin_lo):
+        if is_host(points) and is_concrete(self.origin, self.origin_lo):
             p64 = np.asarray(points, dtype=np.float64)
             o64 = np.asarray(self.origin, np.float64) + np.asarray(self.origin_lo, np.float64)
             return _sample_local(self, host_array((p64 - o64).astype(dtype)))

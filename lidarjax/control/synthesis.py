@@ -153,7 +153,7 @@ def welch_coherence(rews, estimate, dt: float, *, nperseg: int, lead: float = 0.
     **Returns:** ``(frequency, coherence, n_segments)``: Hz (the bins above 0), the estimate,
     the number of independent segments averaged.
     """
-    # imported here: scipy.signal (and the scipy.stats it imports) was 1 s of `import lidarjax`
+    # imported here: scipy.signal (and the scipy.stats it imports) was 1.1 s of `import lidarjax`
     import scipy.signal
 
     est = np.roll(np.asarray(estimate, np.float64), int(round(float(lead) / float(dt))))
